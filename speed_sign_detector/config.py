@@ -1,0 +1,266 @@
+"""Frozen configuration of every stage, and its loading from parameters or YAML.
+
+Each field carries its description and valid range in ``dataclasses.field`` metadata
+(see :func:`setting`), so the ROS node declares its parameters from these classes
+alone (one declaration, with descriptors and ranges) and every way of building a
+config (code, YAML file, ROS parameters) is validated by the same rules.
+
+Parameter names are ``<section>.<field>``, e.g. ``detector.min_radius_px``.
+"""
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TypeVar
+
+from speed_sign_detector.errors import ConfigError
+
+ConfigT = TypeVar('ConfigT')
+
+
+def setting(default: Any, description: str, *, low: float | None = None,
+            high: float | None = None, choices: tuple[str, ...] | None = None) -> Any:
+    """Declare a config field with its description and valid range (inclusive)."""
+    return field(default=default, metadata={
+        'description': description, 'low': low, 'high': high, 'choices': choices})
+
+
+def validate(config: Any) -> None:
+    """Check every field of a config dataclass against its declared range.
+
+    Raises:
+        ConfigError: naming the field, the value and the allowed range.
+    """
+    for item in dataclasses.fields(config):
+        value = getattr(config, item.name)
+        meta = item.metadata
+        if dataclasses.is_dataclass(value):
+            continue
+        expected_type = type(item.default) if item.default is not dataclasses.MISSING else None
+        if expected_type is float and isinstance(value, int) and not isinstance(value, bool):
+            object.__setattr__(config, item.name, float(value))
+            value = float(value)
+        if expected_type is not None and not isinstance(value, expected_type):
+            raise ConfigError(f'{type(config).__name__}.{item.name} must be '
+                              f'{expected_type.__name__}, got {value!r}')
+        low, high, choices = meta.get('low'), meta.get('high'), meta.get('choices')
+        if low is not None and value < low:
+            raise ConfigError(f'{type(config).__name__}.{item.name} = {value!r} is below '
+                              f'its minimum {low}')
+        if high is not None and value > high:
+            raise ConfigError(f'{type(config).__name__}.{item.name} = {value!r} is above '
+                              f'its maximum {high}')
+        if choices is not None and value not in choices:
+            raise ConfigError(f'{type(config).__name__}.{item.name} = {value!r} is not one '
+                              f'of {", ".join(choices)}')
+
+
+@dataclass(frozen=True)
+class DetectorConfig:
+    """Radial-symmetry detector (IVS 2011, sections III-A, III-B, III-D)."""
+
+    min_radius_px: float = setting(5.0, 'Smallest sign radius searched, in pixels.',
+                                   low=2.0, high=200.0)
+    max_radius_px: float = setting(40.0, 'Largest sign radius searched, in pixels.',
+                                   low=3.0, high=400.0)
+    radius_bands: int = setting(4, 'Number of radius bands voted separately to recover '
+                                'the size (section III-D).', low=1, high=8)
+    gradient_threshold: float = setting(40.0, 'Minimum 3x3 Sobel gradient magnitude of '
+                                        'an edge pixel, in gray levels per pixel x 8.',
+                                        low=0.0, high=2000.0)
+    max_candidates: int = setting(7, 'Most candidates reported per frame.', low=1, high=64)
+    block_size_px: int = setting(8, 'Block size of the max reduction, in pixels.',
+                                 low=1, high=32)
+    polarity: str = setting('bright_inside', 'Which side of an edge votes: '
+                            'bright_inside (white disc in a dark ring), dark_inside, '
+                            'or both.', choices=('bright_inside', 'dark_inside', 'both'))
+    min_score: float = setting(0.0, 'Candidates scoring below this are not reported.',
+                               low=0.0, high=1e9)
+
+    def __post_init__(self) -> None:
+        validate(self)
+        if self.max_radius_px <= self.min_radius_px:
+            raise ConfigError(f'DetectorConfig.max_radius_px ({self.max_radius_px}) must be '
+                              f'larger than min_radius_px ({self.min_radius_px})')
+
+
+@dataclass(frozen=True)
+class ClassifierConfig:
+    """FFT template classifier (DAGM 2010)."""
+
+    psr_threshold: float = setting(6.0, 'Peak-to-sidelobe ratio below which the answer is '
+                                   '"no sign".', low=0.0, high=1000.0)
+    kth_law: float = setting(0.1, 'Exponent k of the kth-law nonlinearity applied to '
+                             'spectrum magnitudes (1 = linear).', low=0.0, high=1.0)
+    min_radius_px: float = setting(8.0, 'Smallest sign radius of the filter banks, pixels.',
+                                   low=3.0, high=200.0)
+    max_radius_px: float = setting(48.0, 'Largest sign radius of the filter banks, pixels.',
+                                   low=4.0, high=400.0)
+    clahe_clip_limit: float = setting(2.0, 'CLAHE contrast clip limit applied to the ROI.',
+                                      low=0.0, high=40.0)
+    cache_dir: str = setting('', 'Folder to cache built filter banks in ("" = no cache).')
+
+    def __post_init__(self) -> None:
+        validate(self)
+        if self.max_radius_px <= self.min_radius_px:
+            raise ConfigError(f'ClassifierConfig.max_radius_px ({self.max_radius_px}) must '
+                              f'be larger than min_radius_px ({self.min_radius_px})')
+
+
+@dataclass(frozen=True)
+class TrackerConfig:
+    """Temporal integration (IVS 2011 III-C, DAGM 2010 section 4)."""
+
+    window_frames: int = setting(10, 'Frames a track is remembered without a new '
+                                 'observation.', low=1, high=100)
+    window_s: float = setting(1.0, 'Seconds (message time) a track is remembered without '
+                              'a new observation; the shorter of the two limits applies.',
+                              low=0.01, high=60.0)
+    association_radius_factor: float = setting(1.0, 'A candidate joins a track when its '
+                                               'centre lies within this many track radii.',
+                                               low=0.1, high=10.0)
+    growth_boost: float = setting(1.5, 'Factor on the vote of an observation that is larger '
+                                  'than the last one (approaching sign).', low=1.0, high=10.0)
+    shrink_penalty: float = setting(0.5, 'Factor on the vote of an observation that is '
+                                    'smaller than the last one.', low=0.0, high=1.0)
+    rotation_jump_deg: float = setting(8.0, 'In-plane rotation change counted as a jump.',
+                                       low=0.0, high=90.0)
+    rotation_penalty: float = setting(0.5, 'Factor on the vote when the rotation jumps.',
+                                      low=0.0, high=1.0)
+    recognition_threshold: float = setting(25.0, 'Accumulated evidence (sum of weighted '
+                                           'PSRs) at which a limit is recognized.',
+                                           low=0.0, high=1e6)
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    """Everything the pipeline needs: one config per stage plus the backend choice."""
+
+    backend: str = setting('auto', 'Voting backend: auto (GL, numpy if no GL context), '
+                           'gl, or numpy.', choices=('auto', 'gl', 'numpy'))
+    classify: bool = setting(True, 'Run the classifier on the candidates (off: detection '
+                             'only).')
+    detector: DetectorConfig = field(default_factory=DetectorConfig)
+    classifier: ClassifierConfig = field(default_factory=ClassifierConfig)
+    tracker: TrackerConfig = field(default_factory=TrackerConfig)
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+
+SECTIONS: dict[str, type] = {
+    'detector': DetectorConfig,
+    'classifier': ClassifierConfig,
+    'tracker': TrackerConfig,
+}
+
+
+@dataclass(frozen=True)
+class ParameterSpec:
+    """One flat parameter: name ``section.field``, default, description, range."""
+
+    name: str
+    default: Any
+    description: str
+    low: float | None
+    high: float | None
+    choices: tuple[str, ...] | None
+
+
+def parameter_specs() -> tuple[ParameterSpec, ...]:
+    """Every flat parameter of :class:`PipelineConfig`, in declaration order."""
+    specs: list[ParameterSpec] = []
+    for item in dataclasses.fields(PipelineConfig):
+        if item.name in SECTIONS:
+            for sub in dataclasses.fields(SECTIONS[item.name]):
+                specs.append(_spec(f'{item.name}.{sub.name}', sub))
+        else:
+            specs.append(_spec(item.name, item))
+    return tuple(specs)
+
+
+def _spec(name: str, item: dataclasses.Field) -> ParameterSpec:
+    meta = item.metadata
+    return ParameterSpec(name, item.default, meta.get('description', ''), meta.get('low'),
+                         meta.get('high'), meta.get('choices'))
+
+
+def to_parameters(config: PipelineConfig) -> dict[str, Any]:
+    """Flatten a config to ``{'section.field': value}``."""
+    flat: dict[str, Any] = {}
+    for spec in parameter_specs():
+        section, _, name = spec.name.rpartition('.')
+        owner = getattr(config, section) if section else config
+        flat[spec.name] = getattr(owner, name)
+    return flat
+
+
+def from_parameters(values: Mapping[str, Any],
+                    base: PipelineConfig | None = None) -> PipelineConfig:
+    """Build a config from flat ``section.field`` values over ``base`` (defaults).
+
+    Raises:
+        ConfigError: for an unknown name or a value out of range.
+    """
+    base = base or PipelineConfig()
+    known = {spec.name for spec in parameter_specs()}
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise ConfigError(f'unknown parameter(s): {", ".join(unknown)}; known are: '
+                          f'{", ".join(sorted(known))}')
+    sections: dict[str, dict[str, Any]] = {name: {} for name in SECTIONS}
+    top: dict[str, Any] = {}
+    for name, value in values.items():
+        section, _, field_name = name.rpartition('.')
+        (sections[section] if section else top)[field_name] = value
+    try:
+        replaced = {name: dataclasses.replace(getattr(base, name), **changes)
+                    for name, changes in sections.items() if changes}
+        return dataclasses.replace(base, **top, **replaced)
+    except TypeError as err:
+        raise ConfigError(f'invalid parameter value: {err}') from err
+
+
+def load_yaml(path: str | Path, node_name: str = 'speed_sign_detector') -> PipelineConfig:
+    """Load a config from a ROS 2 parameter file (``node: ros__parameters: ...``).
+
+    Nested mappings (``detector: {min_radius_px: 5}``) and flat dotted names are both
+    accepted. A file without the ``ros__parameters`` wrapper is read as the mapping itself.
+
+    Raises:
+        ConfigError: when the file is missing, not YAML, or holds invalid values.
+    """
+    import yaml
+
+    path = Path(path)
+    try:
+        document = yaml.safe_load(path.read_text())
+    except OSError as err:
+        raise ConfigError(f'cannot read config file {path}: {err}') from err
+    except yaml.YAMLError as err:
+        raise ConfigError(f'config file {path} is not valid YAML: {err}') from err
+    if document is None:
+        return PipelineConfig()
+    if not isinstance(document, dict):
+        raise ConfigError(f'config file {path} must hold a mapping, not {type(document).__name__}')
+    for key in (node_name, f'/{node_name}', '/**'):
+        if isinstance(document.get(key), dict) and 'ros__parameters' in document[key]:
+            document = document[key]['ros__parameters']
+            break
+    return from_parameters(_flatten(document))
+
+
+def _flatten(mapping: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
+    flat: dict[str, Any] = {}
+    for key, value in mapping.items():
+        name = f'{prefix}{key}'
+        if isinstance(value, Mapping):
+            flat.update(_flatten(value, f'{name}.'))
+        else:
+            flat[name] = value
+    return flat

@@ -1,0 +1,63 @@
+"""``speed_sign_eval``: measure the pipeline on scenes, crops or bags.
+
+Subcommands (each in its own module, registered here):
+
+- ``scenes DIR``: GTSDB-format scenes (``DIR/images``, ``DIR/gt.txt``), detection and
+  single-frame recognition metrics (:mod:`speed_sign_detector.tools.eval_scenes`).
+- ``crops DIR``: GTSRB-format crops (``DIR/labels.csv``), classification accuracy
+  (:mod:`speed_sign_detector.tools.eval_crops`).
+- ``bag BAG``: a recorded drive through the full pipeline, per-sign metrics against a
+  truth file, optional results bag (:mod:`speed_sign_detector.tools.eval_bag`).
+
+With ``--json`` the last line on stdout is ONE JSON object; progress and logs go to
+stderr. Exit status: 0 on success, 1 when the evaluation failed with an error, 2 for
+bad command-line usage.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import sys
+
+from speed_sign_detector.errors import SpeedSignError
+
+SUBCOMMAND_MODULES = ('eval_scenes', 'eval_crops', 'eval_bag')
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser with every available subcommand registered."""
+    parser = argparse.ArgumentParser(
+        prog='speed_sign_eval', description='Evaluate speed-limit sign detection and '
+        'recognition on scenes, crops or bags.')
+    parser.add_argument('-v', '--verbose', action='store_true', help='debug logging on stderr')
+    subparsers = parser.add_subparsers(dest='command', required=True, metavar='{scenes,crops,bag}')
+    for module_name in SUBCOMMAND_MODULES:
+        try:
+            module = importlib.import_module(f'speed_sign_detector.tools.{module_name}')
+        except ModuleNotFoundError as err:
+            if err.name != f'speed_sign_detector.tools.{module_name}':
+                raise
+            continue
+        module.register(subparsers)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run ``speed_sign_eval``; returns the process exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
+                        format='%(levelname)s %(name)s: %(message)s', stream=sys.stderr)
+    try:
+        return int(args.run(args))
+    except SpeedSignError as err:
+        print(f'speed_sign_eval {args.command}: error: {err}', file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print('speed_sign_eval: interrupted', file=sys.stderr)
+        return 130
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,19 @@
+"""Shared fixtures: the real data folder, and a per-module ROS domain."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+PROJECT_ROOT = Path(__file__).resolve().parents[1]
+#: ../shared/data relative to the project root (see that folder's README).
+SHARED_DATA_DIR = PROJECT_ROOT.parent / 'shared' / 'data'
+
+
+@pytest.fixture(scope='session')
+def shared_data_dir() -> Path:
+    """The real-data folder; tests needing it skip with the reason when it is absent."""
+    if not SHARED_DATA_DIR.is_dir():
+        pytest.skip(f'real data not available: {SHARED_DATA_DIR} does not exist '
+                    '(it lives beside the project checkout, see README "Data")')
+    return SHARED_DATA_DIR

@@ -1,0 +1,134 @@
+"""Tracker: evidence accumulation, growth/shrink weighting, expiry, active limit."""
+from __future__ import annotations
+
+import pytest
+
+from speed_sign_detector.config import TrackerConfig
+from speed_sign_detector.detection.candidates import Candidate
+from speed_sign_detector.recognition.classifier import Classification
+from speed_sign_detector.tracking import Tracker
+
+FRAME_PERIOD_S = 1 / 30
+
+
+def observation(label: str, x_px: float, y_px: float, radius_px: float, psr: float = 10.0,
+                rotation_deg: float = 0.0) -> tuple[Candidate, Classification]:
+    limit = int(label) if label.isdigit() else None
+    return (Candidate(x_px, y_px, radius_px, 1.0),
+            Classification(label, limit, psr, radius_px, rotation_deg, 3.0, x_px, y_px))
+
+
+def approach(tracker: Tracker, label: str, frames: int, start_s: float = 0.0,
+             x_px: float = 300.0, growth_px: float = 1.0) -> list[int]:
+    """Feed a sign that grows and drifts right; returns recognized limits per frame."""
+    recognized = []
+    for index in range(frames):
+        pair = observation(label, x_px + 2 * index, 200.0, 10.0 + growth_px * index)
+        update = tracker.update(start_s + index * FRAME_PERIOD_S, [pair])
+        recognized.append(update.recognized_limit_kmh)
+    return recognized
+
+
+def test_approaching_sign_is_recognized_exactly_once() -> None:
+    tracker = Tracker(TrackerConfig(recognition_threshold=25.0))
+    recognized = approach(tracker, '80', frames=12)
+    assert [value for value in recognized if value] == [80]
+    # first frame votes 10; the next grows by 10 %, so it votes 10 x 1.5 -> 25 on frame 2
+    assert recognized.index(80) == 1
+    assert tracker.active_limit_kmh == 80
+
+
+def test_static_or_shrinking_artifact_is_slower_than_growing_sign() -> None:
+    config = TrackerConfig(recognition_threshold=60.0)
+    growing = approach(Tracker(config), '50', frames=6, growth_px=1.0)
+    shrinking = approach(Tracker(config), '50', frames=6, growth_px=-1.0)
+    assert 50 in growing
+    assert 50 not in shrinking
+
+
+def test_rotation_jumps_are_penalised() -> None:
+    config = TrackerConfig(recognition_threshold=35.0, growth_boost=1.0)
+    tracker = Tracker(config)
+    results = []
+    for index in range(4):
+        pair = observation('30', 100.0, 100.0, 20.0, rotation_deg=12.0 * (index % 2))
+        results.append(tracker.update(index * FRAME_PERIOD_S, [pair]).recognized_limit_kmh)
+    assert 30 not in results  # 10 + 5 + 5 + 5 < 35
+    steady = Tracker(config)
+    results = [steady.update(index * FRAME_PERIOD_S,
+                             [observation('30', 100.0, 100.0, 20.0)]).recognized_limit_kmh
+               for index in range(4)]
+    assert 30 in results
+
+
+def test_majority_vote_blocks_a_contested_label() -> None:
+    tracker = Tracker(TrackerConfig(recognition_threshold=20.0, growth_boost=1.0))
+    results = []
+    # evidence after each frame: 30:10 | 80:10 | 50:10 | 30:20 of 40 | 80:20 of 50
+    for index, label in enumerate(['30', '80', '50', '30', '80']):
+        pair = observation(label, 100.0, 100.0, 20.0)
+        results.append(tracker.update(index * FRAME_PERIOD_S, [pair]).recognized_limit_kmh)
+    assert results == [0, 0, 0, 0, 0]
+    # a clear majority then wins
+    update = tracker.update(5 * FRAME_PERIOD_S, [observation('30', 100.0, 100.0, 20.0, psr=40.0)])
+    assert update.recognized_limit_kmh == 30
+
+
+def test_end_of_limit_clears_and_new_limit_replaces() -> None:
+    tracker = Tracker(TrackerConfig(recognition_threshold=25.0))
+    approach(tracker, '100', frames=5)
+    assert tracker.active_limit_kmh == 100
+    approach(tracker, 'end_of_limit', frames=5, start_s=5.0)
+    assert tracker.active_limit_kmh == 0
+    approach(tracker, '60', frames=5, start_s=10.0)
+    assert tracker.active_limit_kmh == 60
+
+
+def test_other_signs_and_no_sign_never_set_a_limit() -> None:
+    tracker = Tracker(TrackerConfig(recognition_threshold=5.0))
+    approach(tracker, 'other_sign', frames=10)
+    approach(tracker, 'no_sign', frames=10, start_s=2.0)
+    assert tracker.active_limit_kmh == 0
+
+
+def test_tracks_expire_by_message_time_despite_few_frames() -> None:
+    config = TrackerConfig(recognition_threshold=25.0, window_s=0.5, window_frames=10)
+    tracker = Tracker(config)
+    tracker.update(0.0, [observation('70', 100.0, 100.0, 20.0)])
+    tracker.update(0.1, [observation('70', 100.0, 100.0, 21.0)])
+    # a dropped stretch of 1 s: same place, but the track must have expired
+    update = tracker.update(1.1, [observation('70', 100.0, 100.0, 22.0)])
+    assert len(update.tracks) == 1
+    assert update.tracks[0].observations == 1
+    assert update.recognized_limit_kmh == 0
+
+
+def test_tracks_expire_by_frame_count() -> None:
+    tracker = Tracker(TrackerConfig(window_frames=2, window_s=10.0))
+    tracker.update(0.0, [observation('70', 100.0, 100.0, 20.0)])
+    for index in range(1, 4):
+        update = tracker.update(index * FRAME_PERIOD_S, [])
+    assert update.tracks == ()
+
+
+def test_two_signs_in_one_frame_keep_separate_tracks() -> None:
+    tracker = Tracker(TrackerConfig(recognition_threshold=1e6))
+    for index in range(5):
+        update = tracker.update(index * FRAME_PERIOD_S, [
+            observation('30', 100.0 + index, 100.0, 15.0 + index),
+            observation('end_of_limit', 400.0 - index, 120.0, 15.0 + index)])
+    assert sorted(track.label for track in update.tracks) == ['30', 'end_of_limit']
+    assert all(track.observations == 5 for track in update.tracks)
+
+
+def test_time_going_backwards_resets() -> None:
+    tracker = Tracker(TrackerConfig(recognition_threshold=25.0))
+    approach(tracker, '120', frames=5, start_s=10.0)
+    assert tracker.active_limit_kmh == 120
+    update = tracker.update(0.0, [])
+    assert update.active_limit_kmh == 0 and update.tracks == ()
+
+
+def test_non_finite_stamp_is_rejected() -> None:
+    with pytest.raises(ValueError, match='finite'):
+        Tracker().update(float('nan'), [])
