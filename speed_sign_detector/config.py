@@ -78,6 +78,27 @@ class DetectorConfig:
                             'or both.', choices=('bright_inside', 'dark_inside', 'both'))
     min_score: float = setting(0.0, 'Candidates scoring below this are not reported.',
                                low=0.0, high=1e9)
+    thin_edges: bool = setting(True, 'Keep only edge pixels that are local maxima of the '
+                               'gradient magnitude along the gradient (non-maximum '
+                               'suppression): thinner edges, fewer votes.')
+    level_min_radius_px: float = setting(4.0, 'A radius band votes on the coarsest pyramid '
+                                         'level (2x2 box averages) on which its smallest '
+                                         'radius still spans this many level pixels.',
+                                         low=1.0, high=100.0)
+    max_pyramid_level: int = setting(3, 'Coarsest pyramid level used for voting (0 = vote '
+                                     'at full resolution only).', low=0, high=6)
+    accumulator_shrink: int = setting(1, 'Vote images are 2^this times smaller than the '
+                                      'pyramid level whose edges vote into them (fewer '
+                                      'fragments; centres are refined to sub-pixel).',
+                                      low=0, high=2)
+    direction_balance: float = setting(1.0, 'How much a centre voted from one side only '
+                                       'is discounted: score = (sum of votes - this x '
+                                       'resultant of the vote directions) / 2 pi '
+                                       '(0 = plain vote sum).', low=0.0, high=2.0)
+    suppression_factor: float = setting(1.0, 'Non-maximum suppression: a candidate closer '
+                                        'than this many radii (the larger of the two) to a '
+                                        'better one is the same sign and dropped.',
+                                        low=0.0, high=10.0)
 
     def __post_init__(self) -> None:
         validate(self)
@@ -92,14 +113,34 @@ class ClassifierConfig:
 
     psr_threshold: float = setting(6.0, 'Peak-to-sidelobe ratio below which the answer is '
                                    '"no sign".', low=0.0, high=1000.0)
+    min_margin: float = setting(0.5, 'PSR lead over the best other label below which a '
+                                'speed-limit answer is withheld ("no sign").',
+                                low=0.0, high=1000.0)
     kth_law: float = setting(0.1, 'Exponent k of the kth-law nonlinearity applied to '
                              'spectrum magnitudes (1 = linear).', low=0.0, high=1.0)
+    noise_tradeoff: float = setting(0.0, 'Optimal trade-off between MACE (0) and noise '
+                                    'tolerance (1) in filter synthesis.', low=0.0, high=1.0)
     min_radius_px: float = setting(8.0, 'Smallest sign radius of the filter banks, pixels.',
                                    low=3.0, high=200.0)
     max_radius_px: float = setting(48.0, 'Largest sign radius of the filter banks, pixels.',
                                    low=4.0, high=400.0)
-    clahe_clip_limit: float = setting(2.0, 'CLAHE contrast clip limit applied to the ROI.',
-                                      low=0.0, high=40.0)
+    radius_step: float = setting(1.12, 'Ratio between the radii of consecutive filter '
+                                 'sizes.', low=1.02, high=2.0)
+    canvas_margin: float = setting(0.15, 'Gray template border around the sign, as a '
+                                   'fraction of its diameter on each side.', low=0.0,
+                                   high=1.0)
+    size_search_ratio: float = setting(1.45, 'Detection filters searched: radii within this '
+                                       'factor of the candidate radius.', low=1.0, high=4.0)
+    position_search: float = setting(0.35, 'Peak search half-width around the candidate '
+                                     'centre, as a fraction of its radius.', low=0.0,
+                                     high=2.0)
+    class_size_neighbours: int = setting(1, 'Classification filters of this many sizes on '
+                                         'each side of the detected size are also tried.',
+                                         low=0, high=4)
+    clahe_clip_limit: float = setting(2.0, 'CLAHE contrast clip limit applied to the ROI '
+                                      '(0 = no CLAHE).', low=0.0, high=40.0)
+    clahe_tiles: int = setting(2, 'CLAHE tile grid (tiles per side) on the ROI.', low=1,
+                               high=16)
     cache_dir: str = setting('', 'Folder to cache built filter banks in ("" = no cache).')
 
     def __post_init__(self) -> None:
@@ -153,6 +194,28 @@ class PipelineConfig:
         validate(self)
 
 
+@dataclass(frozen=True)
+class NodeOptions:
+    """Options of the ROS node alone (the pipeline's are in :class:`PipelineConfig`).
+
+    They share the node's parameter file with the pipeline's; the offline tools read
+    that file too and ignore these.
+    """
+
+    publish_debug_image: bool = setting(True, 'Publish debug_image (drawn only while '
+                                        'someone subscribes).')
+    diagnostics_period_s: float = setting(1.0, 'Period of the /diagnostics status, '
+                                          'seconds.', low=0.1, high=60.0)
+    no_image_warning_s: float = setting(5.0, 'Warn when no image arrived for this many '
+                                        'seconds.', low=0.5, high=3600.0)
+    error_log_period_s: float = setting(5.0, 'Bad-input errors are logged at most once per '
+                                        'this many seconds (the rest are counted).',
+                                        low=0.0, high=3600.0)
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+
 SECTIONS: dict[str, type] = {
     'detector': DetectorConfig,
     'classifier': ClassifierConfig,
@@ -182,6 +245,11 @@ def parameter_specs() -> tuple[ParameterSpec, ...]:
         else:
             specs.append(_spec(item.name, item))
     return tuple(specs)
+
+
+def node_option_specs() -> tuple[ParameterSpec, ...]:
+    """The node-only parameters (:class:`NodeOptions`) as flat specs."""
+    return tuple(_spec(item.name, item) for item in dataclasses.fields(NodeOptions))
 
 
 def _spec(name: str, item: dataclasses.Field) -> ParameterSpec:
@@ -231,6 +299,7 @@ def load_yaml(path: str | Path, node_name: str = 'speed_sign_detector') -> Pipel
 
     Nested mappings (``detector: {min_radius_px: 5}``) and flat dotted names are both
     accepted. A file without the ``ros__parameters`` wrapper is read as the mapping itself.
+    The node's own options (:class:`NodeOptions`) may be present and are ignored here.
 
     Raises:
         ConfigError: when the file is missing, not YAML, or holds invalid values.
@@ -252,7 +321,9 @@ def load_yaml(path: str | Path, node_name: str = 'speed_sign_detector') -> Pipel
         if isinstance(document.get(key), dict) and 'ros__parameters' in document[key]:
             document = document[key]['ros__parameters']
             break
-    return from_parameters(_flatten(document))
+    node_options = {spec.name for spec in node_option_specs()}
+    return from_parameters({name: value for name, value in _flatten(document).items()
+                            if name not in node_options})
 
 
 def _flatten(mapping: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:

@@ -51,6 +51,11 @@ class EncodingLayout:
         return self.channels * self.bytes_per_channel
 
 
+#: BT.601 studio-range luma (16..235) -> full-range gray (0..255), as YUV -> BGR -> gray.
+_STUDIO_TO_FULL_RANGE = np.clip(np.round((np.arange(256) - 16) * 255.0 / 219.0),
+                                0, 255).astype(np.uint8)
+
+
 def _bayer_code(pattern: str) -> int:
     """cv2 demosaic-to-gray code for a Bayer pattern named as in ROS (e.g. 'RGGB')."""
     return int(getattr(cv2, f'COLOR_Bayer{pattern}2GRAY'))
@@ -86,7 +91,8 @@ def image_to_gray(msg: Any) -> np.ndarray:
 
     Honours ``step`` (row padding) and ``is_bigendian`` (16-bit encodings); 16-bit
     values are scaled to 8 bit by dropping the low byte (``value >> 8``). Bayer images are
-    demosaiced with cv2, YUV 4:2:2 images give their luma plane.
+    demosaiced with cv2, YUV 4:2:2 images give their luma plane (BT.601 studio range
+    16..235 stretched to 0..255, as a conversion through BGR would).
 
     Args:
         msg: object with fields ``height``, ``width``, ``encoding``, ``is_bigendian``,
@@ -124,7 +130,8 @@ def image_to_gray(msg: Any) -> np.ndarray:
 
     if layout.luma_offset is not None:
         rows = buffer[:step * height].reshape(height, step)
-        return np.ascontiguousarray(rows[:, layout.luma_offset:row_bytes:2])
+        luma = np.ascontiguousarray(rows[:, layout.luma_offset:row_bytes:2])
+        return cv2.LUT(luma, _STUDIO_TO_FULL_RANGE)
 
     byte_order = '>' if msg.is_bigendian else '<'
     dtype = np.dtype(np.uint8) if layout.bytes_per_channel == 1 else np.dtype(f'{byte_order}u2')

@@ -4,7 +4,13 @@ The result type :class:`Candidate` is shared by every backend.
 """
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
 from dataclasses import dataclass
+
+import numpy as np
+
+from speed_sign_detector.detection.voting_numpy import RadiusBand
 
 
 @dataclass(frozen=True)
@@ -26,3 +32,123 @@ class Candidate:
     radius_px: float
     score: float
     band: int = 0
+
+
+@dataclass(frozen=True)
+class BlockMaxima:
+    """Best vote pixel of every block of the frame (IVS 2011 IV, 8x8 max reduction).
+
+    All arrays are (rows, cols) = (ceil(H / block), ceil(W / block)); a block without any
+    positive score has ``score <= 0``.
+
+    Attributes:
+        score: best score in the block over all bands (see :func:`band_scores`).
+        x_px, y_px: its centre in full-resolution pixels (sub-pixel parabola fit).
+        radius_px: the radius estimate there (harmonic mean voting distance), pixels.
+        band: the band it came from.
+    """
+
+    score: np.ndarray
+    x_px: np.ndarray
+    y_px: np.ndarray
+    radius_px: np.ndarray
+    band: np.ndarray
+
+
+def score_normaliser() -> float:
+    """Factor making a complete circle score 1: ``1 / (2 pi)``.
+
+    Every edge pixel of a circle of radius R votes ``1 / R`` at its centre, and there are
+    about ``2 pi R`` of them.
+    """
+    return 1.0 / (2.0 * math.pi)
+
+
+def band_scores(votes: np.ndarray, direction_balance: float) -> np.ndarray:
+    """Direction-balanced score of a band's vote image (H, W, CHANNELS) -> (H, W) float32.
+
+    ``(sum w - direction_balance |sum w v|) / 2 pi``: the weighted vote minus the resultant
+    of the vote directions. A complete circle scores 1 (its votes come from all sides and
+    their resultant vanishes); votes from one side only (a straight edge, a corner) are
+    discounted by up to ``direction_balance``.
+    """
+    resultant = np.sqrt(votes[..., 1] * votes[..., 1] + votes[..., 2] * votes[..., 2])
+    score = (votes[..., 0] - np.float32(direction_balance) * resultant)
+    return (score * np.float32(score_normaliser())).astype(np.float32)
+
+
+def block_maxima(votes: Sequence[np.ndarray], bands: Sequence[RadiusBand],
+                 frame_shape: tuple[int, int], block_px: int,
+                 direction_balance: float) -> BlockMaxima:
+    """Per-block best pixel over all bands, the numpy twin of the GL reduction shader."""
+    height, width = frame_shape
+    rows, cols = -(-height // block_px), -(-width // block_px)
+    best = np.full((rows, cols), -1.0, np.float32)
+    x_px = np.zeros((rows, cols), np.float32)
+    y_px = np.zeros((rows, cols), np.float32)
+    radius_px = np.zeros((rows, cols), np.float32)
+    band_index = np.zeros((rows, cols), np.int32)
+    for band, image in zip(bands, votes):
+        score = band_scores(image, direction_balance)
+        level_height, level_width = score.shape
+        step = max(1, block_px // band.target_scale)
+        padded = np.full((rows * step, cols * step), -np.inf, np.float32)
+        used_rows, used_cols = min(level_height, rows * step), min(level_width, cols * step)
+        padded[:used_rows, :used_cols] = score[:used_rows, :used_cols]
+        tiles = padded.reshape(rows, step, cols, step).transpose(0, 2, 1, 3)
+        tiles = tiles.reshape(rows, cols, step * step)
+        arg = tiles.argmax(axis=-1)
+        value = np.take_along_axis(tiles, arg[..., None], axis=-1)[..., 0]
+        better = (value > 0.0) & (value > best)
+        if not np.any(better):
+            continue
+        block_rows, block_cols = np.nonzero(better)
+        qy = block_rows * step + arg[better] // step
+        qx = block_cols * step + arg[better] % step
+        centre = score[qy, qx]
+
+        def clamped(yy: np.ndarray, xx: np.ndarray) -> np.ndarray:
+            return score[np.clip(yy, 0, level_height - 1), np.clip(xx, 0, level_width - 1)]
+
+        offset_x = _parabola_offset(clamped(qy, qx - 1), centre, clamped(qy, qx + 1))
+        offset_y = _parabola_offset(clamped(qy - 1, qx), centre, clamped(qy + 1, qx))
+        half_step = 0.5 * (band.target_scale - 1)
+        best[better] = centre
+        x_px[better] = band.target_scale * (qx + offset_x) + half_step
+        y_px[better] = band.target_scale * (qy + offset_y) + half_step
+        radius_px[better] = image[qy, qx, 3] / image[qy, qx, 0] * band.scale
+        band_index[better] = band.index
+    return BlockMaxima(best, x_px, y_px, radius_px, band_index)
+
+
+def _parabola_offset(minus: np.ndarray, centre: np.ndarray, plus: np.ndarray) -> np.ndarray:
+    """Sub-pixel peak offset in [-0.5, 0.5] of a 3-point parabola (0 when not concave)."""
+    curvature = minus - 2.0 * centre + plus
+    with np.errstate(divide='ignore', invalid='ignore'):
+        offset = np.where(curvature < 0.0, 0.5 * (minus - plus) / curvature, 0.0)
+    return np.clip(offset, -0.5, 0.5).astype(np.float32)
+
+
+def select_candidates(maxima: BlockMaxima, max_candidates: int, min_score: float,
+                      suppression_factor: float) -> tuple[Candidate, ...]:
+    """Top-N block maxima, best first, with non-maximum suppression.
+
+    A block maximum is dropped when its centre lies within ``suppression_factor x`` the
+    larger of the two radii of an already accepted (better) candidate, so two candidates
+    are never the same sign.
+    """
+    order = np.argsort(-maxima.score, axis=None, kind='stable')
+    scores = maxima.score.ravel()
+    xs, ys = maxima.x_px.ravel(), maxima.y_px.ravel()
+    radii, bands = maxima.radius_px.ravel(), maxima.band.ravel()
+    accepted: list[Candidate] = []
+    for index in order:
+        score = float(scores[index])
+        if score <= 0.0 or score < min_score or len(accepted) >= max_candidates:
+            break
+        x, y, radius = float(xs[index]), float(ys[index]), float(radii[index])
+        if any(math.hypot(x - other.x_px, y - other.y_px)
+               < suppression_factor * max(radius, other.radius_px) for other in accepted):
+            continue
+        accepted.append(Candidate(x, y, radius, score, int(bands[index])))
+    return tuple(accepted)

@@ -1,0 +1,155 @@
+"""Frame validation, image pyramid and 3x3 Sobel edge extraction (IVS 2011, III-A).
+
+This is the numpy reference of the preprocessing; ``voting_gl`` runs the same maths in
+compute shaders. Conventions shared by both backends:
+
+- Pixel ``(row i, column j)`` has its centre at ``(x, y) = (j, i)``.
+- Pyramid level ``k + 1`` is the 2x2 box average of level ``k`` cropped to even size
+  (``floor(w / 2) x floor(h / 2)``), kept in float32 (no rounding), so both backends
+  see identical gray values. A level-``k`` pixel ``(x, y)`` covers full-resolution
+  pixels ``2^k x .. 2^k x + 2^k - 1``; its centre is at ``2^k x + (2^k - 1) / 2``.
+- Gradients are the 3x3 Sobel (``gx = [[-1,0,1],[-2,0,2],[-1,0,1]]``), evaluated on
+  interior pixels only (the one-pixel border never holds an edge). ``(gx, gy)`` points
+  from dark to bright.
+- An edge pixel has magnitude ``>= threshold`` and, with non-maximum suppression, is a
+  local maximum of the magnitude along its gradient direction (quantised to 0, 45, 90,
+  135 degrees): ``m > m(p - d)`` and ``m >= m(p + d)``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from speed_sign_detector.errors import DetectorError
+
+
+class InvalidFrameError(DetectorError, ValueError):
+    """A frame given to the detector is not a usable grayscale image."""
+
+
+@dataclass(frozen=True)
+class EdgeList:
+    """Edge pixels of one pyramid level.
+
+    Attributes:
+        x_px, y_px: (E,) float32 pixel coordinates at this level.
+        gx, gy: (E,) float32 Sobel gradient components (dark -> bright).
+        level: pyramid level (0 = full resolution).
+        width_px, height_px: size of this level, in its own pixels.
+    """
+
+    x_px: np.ndarray
+    y_px: np.ndarray
+    gx: np.ndarray
+    gy: np.ndarray
+    level: int
+    width_px: int
+    height_px: int
+
+    @property
+    def count(self) -> int:
+        """Number of edge pixels."""
+        return int(self.x_px.shape[0])
+
+
+def validate_frame(gray: np.ndarray, min_size_px: int) -> np.ndarray:
+    """Check a grayscale frame and return it as a C-contiguous (H, W) uint8 array.
+
+    Float input is accepted when it holds finite gray levels in [0, 255] (rounded).
+
+    Raises:
+        InvalidFrameError: not an ndarray, empty, not 2-D, unsupported dtype, NaN or
+            infinite values, values out of range, or smaller than ``min_size_px`` on a side.
+    """
+    if not isinstance(gray, np.ndarray):
+        raise InvalidFrameError(f'frame must be a numpy array, got {type(gray).__name__}')
+    if gray.ndim != 2:
+        raise InvalidFrameError(f'frame must be 2-D grayscale (H, W), got shape {gray.shape}')
+    if gray.size == 0:
+        raise InvalidFrameError(f'frame is empty (shape {gray.shape})')
+    if gray.dtype == np.uint8:
+        frame = gray
+    elif np.issubdtype(gray.dtype, np.floating):
+        if not np.all(np.isfinite(gray)):
+            raise InvalidFrameError('frame holds NaN or infinite values')
+        if gray.min() < 0.0 or gray.max() > 255.0:
+            raise InvalidFrameError(f'float frame values must lie in [0, 255], got '
+                                    f'[{gray.min()}, {gray.max()}]')
+        frame = np.rint(gray).astype(np.uint8)
+    else:
+        raise InvalidFrameError(f'frame dtype must be uint8 (or float gray levels), '
+                                f'got {gray.dtype}')
+    height, width = frame.shape
+    if height < min_size_px or width < min_size_px:
+        raise InvalidFrameError(f'frame {width}x{height} is smaller than the voting window '
+                                f'({min_size_px} px on each side)')
+    return np.ascontiguousarray(frame)
+
+
+def build_pyramid(gray: np.ndarray, levels: int) -> list[np.ndarray]:
+    """Float32 box-filter pyramid: ``levels`` images, level 0 = ``gray`` as float32."""
+    pyramid = [gray.astype(np.float32)]
+    for _ in range(1, levels):
+        previous = pyramid[-1]
+        height, width = previous.shape[0] // 2, previous.shape[1] // 2
+        cropped = previous[:2 * height, :2 * width]
+        pyramid.append(np.float32(0.25) * (
+            (cropped[0::2, 0::2] + cropped[0::2, 1::2])
+            + (cropped[1::2, 0::2] + cropped[1::2, 1::2])))
+    return pyramid
+
+
+def sobel(image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """3x3 Sobel of a float32 (H, W) image; returns ``(gx, gy)``, zero on the border."""
+    gx = np.zeros_like(image)
+    gy = np.zeros_like(image)
+    top, mid, bot = image[:-2], image[1:-1], image[2:]
+    gx[1:-1, 1:-1] = ((top[:, 2:] - top[:, :-2]) + np.float32(2.0) * (mid[:, 2:] - mid[:, :-2])
+                      + (bot[:, 2:] - bot[:, :-2]))
+    left, centre, right = image[:, :-2], image[:, 1:-1], image[:, 2:]
+    gy[1:-1, 1:-1] = ((left[2:] - left[:-2]) + np.float32(2.0) * (centre[2:] - centre[:-2])
+                      + (right[2:] - right[:-2]))
+    return gx, gy
+
+
+def extract_edges(image: np.ndarray, level: int, threshold: float,
+                  thin: bool) -> EdgeList:
+    """Edge pixels of one pyramid level (float32 (H, W) gray image).
+
+    Args:
+        image: the level's gray values.
+        level: its pyramid level (recorded in the result).
+        threshold: minimum Sobel magnitude.
+        thin: apply non-maximum suppression along the gradient.
+    """
+    gx, gy = sobel(image)
+    magnitude = np.sqrt(gx * gx + gy * gy)
+    keep = magnitude >= np.float32(threshold)
+    keep[0, :] = keep[-1, :] = False
+    keep[:, 0] = keep[:, -1] = False
+    if thin:
+        keep &= _is_ridge(magnitude, gx, gy)
+    rows, cols = np.nonzero(keep)
+    return EdgeList(cols.astype(np.float32), rows.astype(np.float32),
+                    gx[rows, cols], gy[rows, cols], level, image.shape[1], image.shape[0])
+
+
+def _is_ridge(magnitude: np.ndarray, gx: np.ndarray, gy: np.ndarray) -> np.ndarray:
+    """True where the magnitude is a maximum along the quantised gradient direction."""
+    padded = np.pad(magnitude, 1)
+    height, width = magnitude.shape
+    # direction index: 0 = horizontal (dx=1,dy=0), 1 = 45 deg (1,1), 2 = vertical, 3 = (-1,1)
+    ax, ay = np.abs(gx), np.abs(gy)
+    tan_22 = np.float32(0.41421357)
+    horizontal = ay <= tan_22 * ax
+    vertical = ax <= tan_22 * ay
+    same_sign = (gx * gy) > 0
+    ridge = np.zeros(magnitude.shape, dtype=bool)
+    for mask, (dx, dy) in ((horizontal, (1, 0)), (vertical & ~horizontal, (0, 1)),
+                           (~horizontal & ~vertical & same_sign, (1, 1)),
+                           (~horizontal & ~vertical & ~same_sign, (-1, 1))):
+        ahead = padded[1 + dy:1 + dy + height, 1 + dx:1 + dx + width]
+        behind = padded[1 - dy:1 - dy + height, 1 - dx:1 - dx + width]
+        ridge |= mask & (magnitude > behind) & (magnitude >= ahead)
+    return ridge

@@ -1,0 +1,465 @@
+"""Radial-symmetry voting on the GPU with moderngl (IVS 2011, section IV).
+
+The same maths as :mod:`speed_sign_detector.detection.voting_numpy`, kept on the GPU:
+
+1. the frame is uploaded once as an R8UI texture;
+2. compute shaders build the float pyramid, the Sobel gradients of each level and,
+   per level, an edge list (SSBO) appended with ``atomicAdd`` on the ``instanceCount`` of
+   that level's indirect draw command, so the CPU never sees the edges;
+3. one instanced indirect draw per radius band: the vertex shader reads edge
+   ``gl_InstanceID`` and emits its trapezoid (two triangles, four with polarity
+   ``both``); the fragment shader adds ``1 / u`` into the direction-sector channel and 1
+   into the count channel (additive blending into float32 targets: two RGBA32F for the
+   eight sectors, one R32F for the count);
+4. a compute shader scores every vote pixel and keeps, per 8x8 full-resolution block,
+   the best pixel over all bands (with a sub-pixel parabola fit), so only
+   ``blocks x 8`` floats are read back.
+
+One moderngl context per :class:`GLVoter`, created in its constructor and used on that
+thread only; :meth:`GLVoter.close` releases it. Per-size resources are rebuilt when the
+frame size changes.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from speed_sign_detector.config import DetectorConfig
+from speed_sign_detector.detection.candidates import BlockMaxima, score_normaliser
+from speed_sign_detector.detection.voting_numpy import (
+    CHANNELS, SPREAD, RadiusBand, level_size, plan_bands, pyramid_levels, vote_signs)
+from speed_sign_detector.errors import DetectorError
+
+_GROUP = 8
+
+_CONVERT_SRC = """
+#version 430
+layout(local_size_x = 8, local_size_y = 8) in;
+layout(binding = 0) uniform usampler2D frame;
+layout(r32f, binding = 0) writeonly uniform image2D level0;
+uniform ivec2 size;
+void main() {
+    ivec2 p = ivec2(gl_GlobalInvocationID.xy);
+    if (p.x >= size.x || p.y >= size.y) return;
+    imageStore(level0, p, vec4(float(texelFetch(frame, p, 0).r)));
+}
+"""
+
+_DOWNSAMPLE_SRC = """
+#version 430
+layout(local_size_x = 8, local_size_y = 8) in;
+layout(r32f, binding = 0) readonly uniform image2D finer;
+layout(r32f, binding = 1) writeonly uniform image2D coarser;
+uniform ivec2 size;
+void main() {
+    ivec2 p = ivec2(gl_GlobalInvocationID.xy);
+    if (p.x >= size.x || p.y >= size.y) return;
+    ivec2 q = 2 * p;
+    float a = imageLoad(finer, q).r + imageLoad(finer, q + ivec2(1, 0)).r;
+    float b = imageLoad(finer, q + ivec2(0, 1)).r + imageLoad(finer, q + ivec2(1, 1)).r;
+    imageStore(coarser, p, vec4(0.25 * (a + b)));
+}
+"""
+
+_GRADIENT_SRC = """
+#version 430
+layout(local_size_x = 8, local_size_y = 8) in;
+layout(r32f, binding = 0) readonly uniform image2D level;
+layout(rgba32f, binding = 1) writeonly uniform image2D gradient;
+uniform ivec2 size;
+float at(ivec2 p) { return imageLoad(level, p).r; }
+void main() {
+    ivec2 p = ivec2(gl_GlobalInvocationID.xy);
+    if (p.x >= size.x || p.y >= size.y) return;
+    if (p.x == 0 || p.y == 0 || p.x == size.x - 1 || p.y == size.y - 1) {
+        imageStore(gradient, p, vec4(0.0));
+        return;
+    }
+    float tl = at(p + ivec2(-1, -1)), tc = at(p + ivec2(0, -1)), tr = at(p + ivec2(1, -1));
+    float ml = at(p + ivec2(-1, 0)), mr = at(p + ivec2(1, 0));
+    float bl = at(p + ivec2(-1, 1)), bc = at(p + ivec2(0, 1)), br = at(p + ivec2(1, 1));
+    float gx = ((tr - tl) + 2.0 * (mr - ml)) + (br - bl);
+    float gy = ((bl - tl) + 2.0 * (bc - tc)) + (br - tr);
+    imageStore(gradient, p, vec4(gx, gy, sqrt(gx * gx + gy * gy), 0.0));
+}
+"""
+
+_EDGES_SRC = """
+#version 430
+layout(local_size_x = 8, local_size_y = 8) in;
+layout(rgba32f, binding = 1) readonly uniform image2D gradient;
+layout(std430, binding = 0) buffer Command { uint command[4]; };
+layout(std430, binding = 1) writeonly buffer Edges { vec4 edges[]; };
+uniform ivec2 size;
+uniform float threshold;
+uniform bool thin;
+uniform uint vertices_per_edge;
+void main() {
+    ivec2 p = ivec2(gl_GlobalInvocationID.xy);
+    if (p.x < 1 || p.y < 1 || p.x >= size.x - 1 || p.y >= size.y - 1) return;
+    vec4 g = imageLoad(gradient, p);
+    if (!(g.z >= threshold)) return;
+    if (thin) {
+        float ax = abs(g.x), ay = abs(g.y);
+        const float tan22 = 0.41421357;
+        ivec2 d;
+        if (ay <= tan22 * ax) d = ivec2(1, 0);
+        else if (ax <= tan22 * ay) d = ivec2(0, 1);
+        else if (g.x * g.y > 0.0) d = ivec2(1, 1);
+        else d = ivec2(-1, 1);
+        ivec2 ahead = p + d, behind = p - d;
+        float m_ahead = (ahead.x < size.x && ahead.y < size.y && ahead.x >= 0)
+            ? imageLoad(gradient, ahead).z : 0.0;
+        float m_behind = (behind.x >= 0 && behind.y >= 0 && behind.x < size.x)
+            ? imageLoad(gradient, behind).z : 0.0;
+        if (!(g.z > m_behind && g.z >= m_ahead)) return;
+    }
+    uint index = atomicAdd(command[0], vertices_per_edge) / vertices_per_edge;
+    edges[index] = vec4(vec2(p), g.x / g.z, g.y / g.z);
+}
+"""
+
+_VOTE_VERTEX_SRC = """
+#version 430
+layout(std430, binding = 1) readonly buffer Edges { vec4 edges[]; };
+uniform vec2 size;
+uniform float max_radius;
+uniform float spread;
+uniform float first_sign;
+uniform float shrink;
+uniform int vertices_per_edge;
+noperspective out float distance_along;
+flat out vec2 direction;
+void main() {
+    vec4 edge = edges[gl_VertexID / vertices_per_edge];
+    int vertex = gl_VertexID % vertices_per_edge;
+    int corner = vertex % 3;
+    direction = (vertex < 3 ? first_sign : -first_sign) * edge.zw;
+    vec2 normal = vec2(-direction.y, direction.x);
+    float r = corner == 0 ? 0.0 : max_radius;
+    float side = corner == 1 ? 1.0 : -1.0;
+    vec2 position = (edge.xy + 0.5) * shrink - 0.5
+        + (r * shrink) * (direction + side * spread * normal);
+    distance_along = r;
+    gl_Position = vec4((position + 0.5) / size * 2.0 - 1.0, 0.0, 1.0);
+}
+"""
+
+_VOTE_FRAGMENT_SRC = """
+#version 430
+noperspective in float distance_along;
+flat in vec2 direction;
+uniform float min_radius;
+layout(location = 0) out vec4 votes;
+void main() {
+    if (distance_along < min_radius) discard;
+    float weight = 1.0 / distance_along;
+    votes = vec4(weight, weight * direction, 1.0);
+}
+"""
+
+_REDUCE_SRC = """
+#version 430
+layout(local_size_x = 8, local_size_y = 8) in;
+layout(binding = 0) uniform sampler2D votes;
+struct Best { vec4 score_x_y_radius; vec4 band_unused; };
+layout(std430, binding = 2) buffer Blocks { Best blocks[]; };
+uniform ivec2 blocks_size;
+uniform ivec2 level_size;
+uniform int block_level_px;
+uniform int scale;
+uniform int target_scale;
+uniform int band;
+uniform float normaliser;
+uniform float direction_balance;
+float score_at(ivec2 q) {
+    vec4 v = texelFetch(votes, q, 0);
+    return (v.x - direction_balance * length(v.yz)) * normaliser;
+}
+float score_clamped(ivec2 q) {
+    return score_at(clamp(q, ivec2(0), level_size - 1));
+}
+float offset(float minus, float centre, float plus) {
+    float curvature = minus - 2.0 * centre + plus;
+    if (curvature >= 0.0) return 0.0;
+    return clamp(0.5 * (minus - plus) / curvature, -0.5, 0.5);
+}
+void main() {
+    ivec2 block = ivec2(gl_GlobalInvocationID.xy);
+    if (block.x >= blocks_size.x || block.y >= blocks_size.y) return;
+    int index = block.y * blocks_size.x + block.x;
+    float best = -1.0;
+    ivec2 best_q = ivec2(0);
+    ivec2 origin = block * block_level_px;
+    for (int dy = 0; dy < block_level_px; ++dy) {
+        for (int dx = 0; dx < block_level_px; ++dx) {
+            ivec2 q = origin + ivec2(dx, dy);
+            if (q.x >= level_size.x || q.y >= level_size.y) continue;
+            float s = score_at(q);
+            if (s > best) { best = s; best_q = q; }
+        }
+    }
+    if (best <= 0.0 || !(best > blocks[index].score_x_y_radius.x)) return;
+    float ox = offset(score_clamped(best_q - ivec2(1, 0)), best,
+                      score_clamped(best_q + ivec2(1, 0)));
+    float oy = offset(score_clamped(best_q - ivec2(0, 1)), best,
+                      score_clamped(best_q + ivec2(0, 1)));
+    vec4 v = texelFetch(votes, best_q, 0);
+    float radius = v.w / v.x * float(scale);
+    float half_step = 0.5 * float(target_scale - 1);
+    blocks[index].score_x_y_radius = vec4(best, float(target_scale) * (float(best_q.x) + ox) + half_step,
+                                          float(target_scale) * (float(best_q.y) + oy) + half_step,
+                                          radius);
+    blocks[index].band_unused = vec4(float(band), 0.0, 0.0, 0.0);
+}
+"""
+
+
+@dataclass
+class _LevelResources:
+    """GPU objects of one pyramid level for one frame size."""
+
+    width_px: int
+    height_px: int
+    image: object
+    gradient: object
+    edges: object
+    command: object
+
+
+@dataclass
+class _BandResources:
+    """Vote targets of one radius band."""
+
+    band: RadiusBand
+    target: object
+    framebuffer: object
+
+
+class GLVoter:
+    """The GL voting backend for one :class:`DetectorConfig` (one context, one thread).
+
+    Raises:
+        DetectorError: when no OpenGL 4.3 context can be created or shaders do not build.
+    """
+
+    def __init__(self, config: DetectorConfig) -> None:
+        import moderngl
+
+        self._config = config
+        self._bands = plan_bands(config)
+        try:
+            self._ctx = moderngl.create_standalone_context(backend='egl', require=430)
+        except Exception as err:  # moderngl raises plain Exception subclasses
+            raise DetectorError(f'cannot create a headless OpenGL 4.3 context (EGL): {err}'
+                                ) from err
+        try:
+            self.renderer = str(self._ctx.info['GL_RENDERER'])
+            self._convert = self._ctx.compute_shader(_CONVERT_SRC)
+            self._downsample = self._ctx.compute_shader(_DOWNSAMPLE_SRC)
+            self._gradient = self._ctx.compute_shader(_GRADIENT_SRC)
+            self._extract = self._ctx.compute_shader(_EDGES_SRC)
+            self._reduce = self._ctx.compute_shader(_REDUCE_SRC)
+            self._vote = self._ctx.program(vertex_shader=_VOTE_VERTEX_SRC,
+                                           fragment_shader=_VOTE_FRAGMENT_SRC)
+            self._vote_array = self._ctx.vertex_array(self._vote, [])
+        except Exception as err:
+            self._ctx.release()
+            raise DetectorError(f'GL voting shaders failed to build: {err}') from err
+        self._size: tuple[int, int] | None = None
+        self._frame = None
+        self._levels: list[_LevelResources] = []
+        self._band_targets: list[_BandResources] = []
+        self._blocks = None
+        self._blocks_shape = (0, 0)
+        self._released = False
+        self.stage_ms: dict[str, float] | None = None
+        self._stage_start = 0.0
+
+    def profile_stages(self, enabled: bool) -> None:
+        """Record per-stage times in ``stage_ms`` (adds a GPU sync per stage; for benches)."""
+        self.stage_ms = {} if enabled else None
+
+    def _stage(self, name: str | None) -> None:
+        if self.stage_ms is None:
+            return
+        self._ctx.finish()
+        now = time.perf_counter()
+        if name is not None:
+            self.stage_ms[name] = self.stage_ms.get(name, 0.0) + 1e3 * (now - self._stage_start)
+        self._stage_start = now
+
+    @property
+    def released(self) -> bool:
+        """True once :meth:`close` has released the context."""
+        return self._released
+
+    def close(self) -> None:
+        """Release every GPU object and the context (idempotent)."""
+        if self._released:
+            return
+        self._release_size_resources()
+        self._ctx.release()
+        self._released = True
+
+    def block_maxima(self, gray: np.ndarray) -> BlockMaxima:
+        """Vote on a validated (H, W) uint8 frame; per-block best pixels (see candidates)."""
+        self._run_votes(gray)
+        self._reduce_blocks()
+        raw = np.frombuffer(self._blocks.read(), dtype=np.float32).reshape(-1, 8)
+        self._stage('readback')
+        rows, cols = self._blocks_shape
+        return BlockMaxima(score=raw[:, 0].reshape(rows, cols).copy(),
+                           x_px=raw[:, 1].reshape(rows, cols).copy(),
+                           y_px=raw[:, 2].reshape(rows, cols).copy(),
+                           radius_px=raw[:, 3].reshape(rows, cols).copy(),
+                           band=raw[:, 4].reshape(rows, cols).astype(np.int32))
+
+    def vote_images(self, gray: np.ndarray) -> list[np.ndarray]:
+        """Vote images of every band, (H_level, W_level, CHANNELS) float32 each."""
+        self._run_votes(gray)
+        images = []
+        for resources in self._band_targets:
+            width, height = resources.target.size
+            images.append(np.frombuffer(resources.target.read(), np.float32).reshape(
+                height, width, CHANNELS).copy())
+        return images
+
+    def edge_counts(self) -> list[int]:
+        """Edge pixels per pyramid level of the last frame (reads 16 bytes per level)."""
+        per_edge = 3 * len(vote_signs(self._config.polarity))
+        return [int(np.frombuffer(level.command.read(), np.uint32)[0]) // per_edge
+                for level in self._levels]
+
+    # -- internals ---------------------------------------------------------------------
+
+    def _ensure_size(self, width: int, height: int) -> None:
+        if self._size == (width, height):
+            return
+        self._release_size_resources()
+        ctx = self._ctx
+        self._frame = ctx.texture((width, height), 1, dtype='u1')
+        self._levels = []
+        level_width, level_height = width, height
+        for _ in range(pyramid_levels(self._bands)):
+            self._levels.append(_LevelResources(
+                level_width, level_height,
+                image=ctx.texture((level_width, level_height), 1, dtype='f4'),
+                gradient=ctx.texture((level_width, level_height), 4, dtype='f4'),
+                edges=ctx.buffer(reserve=16 * level_width * level_height),
+                command=ctx.buffer(reserve=16)))
+            level_width, level_height = level_width // 2, level_height // 2
+        self._band_targets = []
+        for band in self._bands:
+            size = level_size(width, height, band.target_level)
+            target = ctx.texture(size, CHANNELS, dtype='f4')
+            self._band_targets.append(_BandResources(
+                band, target, ctx.framebuffer(color_attachments=[target])))
+        block = self._config.block_size_px
+        self._blocks_shape = (-(-height // block), -(-width // block))
+        self._blocks = ctx.buffer(reserve=32 * self._blocks_shape[0] * self._blocks_shape[1])
+        self._size = (width, height)
+
+    def _release_size_resources(self) -> None:
+        objects = [self._frame, self._blocks]
+        for level in self._levels:
+            objects += [level.image, level.gradient, level.edges, level.command]
+        for resources in self._band_targets:
+            objects += [resources.framebuffer, resources.target]
+        for item in objects:
+            if item is not None:
+                item.release()
+        self._frame, self._blocks = None, None
+        self._levels, self._band_targets = [], []
+        self._size = None
+
+    def _run_votes(self, gray: np.ndarray) -> None:
+        if self._released:
+            raise DetectorError('the GL detector has been closed')
+        height, width = gray.shape
+        self._stage(None)
+        self._ensure_size(width, height)
+        ctx = self._ctx
+        self._frame.write(gray.tobytes())
+        self._frame.use(0)
+        self._levels[0].image.bind_to_image(0, read=False, write=True)
+        self._convert['size'] = (width, height)
+        self._convert.run(_groups(width), _groups(height))
+        ctx.memory_barrier()
+        for finer, coarser in zip(self._levels, self._levels[1:]):
+            finer.image.bind_to_image(0, read=True, write=False)
+            coarser.image.bind_to_image(1, read=False, write=True)
+            self._downsample['size'] = (coarser.width_px, coarser.height_px)
+            self._downsample.run(_groups(coarser.width_px), _groups(coarser.height_px))
+            ctx.memory_barrier()
+        self._stage('upload_pyramid')
+        vertices = 3 * len(vote_signs(self._config.polarity))
+        self._extract['vertices_per_edge'] = vertices
+        self._extract['threshold'] = float(self._config.gradient_threshold)
+        self._extract['thin'] = bool(self._config.thin_edges)
+        for level in self._levels:
+            level.image.bind_to_image(0, read=True, write=False)
+            level.gradient.bind_to_image(1, read=False, write=True)
+            self._gradient['size'] = (level.width_px, level.height_px)
+            self._gradient.run(_groups(level.width_px), _groups(level.height_px))
+            ctx.memory_barrier()
+            self._stage('gradient')
+            level.command.write(np.array([0, 1, 0, 0], np.uint32).tobytes())
+            level.gradient.bind_to_image(1, read=True, write=False)
+            level.command.bind_to_storage_buffer(0)
+            level.edges.bind_to_storage_buffer(1)
+            self._extract['size'] = (level.width_px, level.height_px)
+            self._extract.run(_groups(level.width_px), _groups(level.height_px))
+            self._stage('edges')
+        ctx.memory_barrier()
+        import moderngl
+
+        ctx.enable_only(moderngl.BLEND)
+        ctx.blend_func = moderngl.ONE, moderngl.ONE
+        ctx.blend_equation = moderngl.FUNC_ADD
+        self._vote['spread'] = SPREAD
+        self._vote['first_sign'] = vote_signs(self._config.polarity)[0]
+        self._vote['vertices_per_edge'] = vertices
+        for resources in self._band_targets:
+            level = self._levels[resources.band.level]
+            r0, r1 = resources.band.level_radii
+            resources.framebuffer.use()
+            resources.framebuffer.clear(0.0, 0.0, 0.0, 0.0)
+            self._vote['size'] = tuple(float(extent) for extent in resources.target.size)
+            self._vote['shrink'] = resources.band.shrink
+            self._vote['max_radius'] = r1
+            self._vote['min_radius'] = r0
+            level.edges.bind_to_storage_buffer(1)
+            self._vote_array.render_indirect(level.command, mode=moderngl.TRIANGLES, count=1)
+        ctx.disable(moderngl.BLEND)
+        ctx.memory_barrier()
+        self._stage('vote')
+
+    def _reduce_blocks(self) -> None:
+        rows, cols = self._blocks_shape
+        initial = np.zeros((rows * cols, 8), np.float32)
+        initial[:, 0] = -1.0
+        self._blocks.write(initial.tobytes())
+        self._blocks.bind_to_storage_buffer(2)
+        block = self._config.block_size_px
+        self._reduce['blocks_size'] = (cols, rows)
+        for resources in self._band_targets:
+            band = resources.band
+            resources.target.use(0)
+            self._reduce['level_size'] = resources.target.size
+            self._reduce['block_level_px'] = max(1, block // band.target_scale)
+            self._reduce['scale'] = band.scale
+            self._reduce['target_scale'] = band.target_scale
+            self._reduce['band'] = band.index
+            self._reduce['normaliser'] = score_normaliser()
+            self._reduce['direction_balance'] = self._config.direction_balance
+            self._reduce.run(_groups(cols), _groups(rows))
+            self._ctx.memory_barrier()
+        self._stage('reduce')
+
+
+def _groups(extent: int) -> int:
+    return int(math.ceil(extent / _GROUP))

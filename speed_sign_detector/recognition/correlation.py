@@ -1,0 +1,127 @@
+"""FFT correlation, kth-law nonlinearity and peak-to-sidelobe ratio (DAGM 2010, section 3).
+
+Conventions: images are real float32 arrays placed at the top-left of an FFT array of
+shape ``fft_shape = (Ny, Nx)``; spectra are the half spectra of :func:`numpy.fft.rfft2`,
+shape ``(..., Ny, Nx // 2 + 1)`` complex64. The correlation plane ``c[ty, tx]`` of a
+scene with a filter is the filter's match with its top-left corner at scene pixel
+``(ty, tx)`` (circular).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def kth_law(spectrum: np.ndarray, k: float) -> np.ndarray:
+    """Raise spectrum magnitudes to the power ``k``, keeping the phase.
+
+    Args:
+        spectrum: complex array of any shape.
+        k: exponent in [0, 1] (1 = unchanged, 0 = phase only).
+
+    Returns:
+        complex64 array of the same shape (zero where the input is zero).
+    """
+    spectrum = np.asarray(spectrum)
+    if k == 1.0:
+        return spectrum.astype(np.complex64, copy=False)
+    magnitude = np.abs(spectrum).astype(np.float32)
+    scale = np.zeros_like(magnitude)
+    nonzero = magnitude > 1e-12
+    scale[nonzero] = magnitude[nonzero] ** np.float32(k - 1.0)
+    return (spectrum * scale).astype(np.complex64, copy=False)
+
+
+def scene_spectrum(roi: np.ndarray, fft_shape: tuple[int, int], k: float) -> np.ndarray:
+    """kth-law half spectrum of a zero-mean ROI.
+
+    Args:
+        roi: (h, w) real array with h <= Ny and w <= Nx (placed top-left, zero padded).
+        fft_shape: (Ny, Nx).
+        k: kth-law exponent.
+
+    Returns:
+        (Ny, Nx // 2 + 1) complex64.
+    """
+    roi = np.asarray(roi, dtype=np.float32)
+    centred = roi - np.float32(roi.mean())
+    return kth_law(np.fft.rfft2(centred, s=fft_shape), k)
+
+
+def correlate(scene: np.ndarray, filters: np.ndarray, fft_shape: tuple[int, int]) -> np.ndarray:
+    """Correlation planes of one scene spectrum with a stack of filter spectra.
+
+    Args:
+        scene: (Ny, Nx // 2 + 1) complex64 scene spectrum (kth-law already applied).
+        filters: (F, Ny, Nx // 2 + 1) complex64 filter spectra.
+        fft_shape: (Ny, Nx).
+
+    Returns:
+        (F, Ny, Nx) float32 correlation planes (one inverse FFT call for the batch).
+    """
+    product = filters.conj()
+    product *= scene[None]
+    return np.fft.irfft2(product, s=fft_shape).astype(np.float32, copy=False)
+
+
+@dataclass(frozen=True)
+class PeakStats:
+    """Peaks of a stack of correlation planes.
+
+    Attributes:
+        value: (F,) peak heights.
+        y, x: (F,) peak positions (plane indices).
+        psr: (F,) peak-to-sidelobe ratios.
+    """
+
+    value: np.ndarray
+    y: np.ndarray
+    x: np.ndarray
+    psr: np.ndarray
+
+
+def peak_psr(planes: np.ndarray, centre_yx: tuple[int, int], search_half: int,
+             sidelobe_half: int, exclude_half: int) -> PeakStats:
+    """Find each plane's peak near a point and its peak-to-sidelobe ratio.
+
+    The peak is the maximum inside the square ``centre +/- search_half`` (circular
+    indices). PSR = (peak - mean) / std over the square ``peak +/- sidelobe_half``
+    without the central square ``peak +/- exclude_half``.
+
+    Args:
+        planes: (F, Ny, Nx) float32 correlation planes.
+        centre_yx: where the peak is expected.
+        search_half, sidelobe_half, exclude_half: half sizes in pixels
+            (``exclude_half < sidelobe_half``).
+
+    Returns:
+        :class:`PeakStats` with arrays of shape (F,).
+    """
+    count, ny, nx = planes.shape
+    if exclude_half >= sidelobe_half:
+        raise ValueError('exclude_half must be smaller than sidelobe_half')
+    cy, cx = centre_yx
+    offsets = np.arange(-search_half, search_half + 1)
+    rows = (cy + offsets) % ny
+    cols = (cx + offsets) % nx
+    window = planes[:, rows[:, None], cols[None, :]].reshape(count, -1)
+    best = np.argmax(window, axis=1)
+    side = offsets.size
+    peak_y = rows[best // side]
+    peak_x = cols[best % side]
+    peak_value = window[np.arange(count), best]
+
+    lobe = np.arange(-sidelobe_half, sidelobe_half + 1)
+    lobe_rows = (peak_y[:, None] + lobe[None, :]) % ny  # (F, L)
+    lobe_cols = (peak_x[:, None] + lobe[None, :]) % nx
+    region = planes[np.arange(count)[:, None, None], lobe_rows[:, :, None],
+                    lobe_cols[:, None, :]]  # (F, L, L)
+    keep = np.ones((lobe.size, lobe.size), dtype=bool)
+    inner = slice(sidelobe_half - exclude_half, sidelobe_half + exclude_half + 1)
+    keep[inner, inner] = False
+    sidelobes = region[:, keep]
+    mean = sidelobes.mean(axis=1)
+    std = sidelobes.std(axis=1)
+    psr = (peak_value - mean) / np.maximum(std, np.float32(1e-12))
+    return PeakStats(peak_value, peak_y, peak_x, psr.astype(np.float32))

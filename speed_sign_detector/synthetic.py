@@ -1,0 +1,821 @@
+"""Synthetic drives: a camera moving along a road lined with signs, frame by frame.
+
+No ROS here: :class:`SyntheticDrive` renders BGR frames (numpy) and the truth rows
+(:class:`speed_sign_detector.truth.TruthRow`) of every sign in view; the
+``speed_sign_synth`` tool writes them into a bag and a truth file.
+
+World and camera (metres, right-handed, y down):
+
+- ``X`` to the right, ``Y`` down, ``Z`` along the road. The ground is the plane
+  ``Y = camera_height_m``; the camera drives in the right lane along ``Z`` at about
+  ``speed_mps`` with a slow lateral sway, a small yaw wobble and a pitch shake.
+- Pinhole camera, focal length ``focal_px`` pixels, principal point at the image
+  centre, pitched down by ``base_pitch_deg``.
+- Road: two 3.6 m lanes between ``X = -5.4`` and ``X = +1.8``, edge lines, a dashed
+  centre line; grass verges, trees, lamp posts with round globes, traffic mirrors.
+- Signs: round signs on poles right of the road (look-alikes also on the left), outer
+  radius 0.32 to 0.40 m, turned slightly out of the image plane. A sign grows from
+  5-10 px radius to 35-50 px before it leaves the image at the right edge and is
+  visible for about 2 s (the first sign) to 4 s at the default speed. The truth lists
+  a sign while its radius is at least 5 px and 3/4 of its box lies inside the image.
+- Look-alikes: end-of-limit signs and other round signs (no overtaking, no entry,
+  weight/width/height limits, ...), half each.
+- Distractors: lamp globes (growing circles), a vehicle ahead with a spare wheel and
+  round tail lights (circles that hardly grow), stickers fixed on the windscreen
+  (circles that never move).
+- Lighting: ``day``, ``dusk`` (darker, warm), ``night`` (dark, low contrast, headlight
+  pool on the road, retro-reflecting signs, lit lamps) or ``mixed`` (day to night
+  over the drive). Motion blur (forward motion and camera shake) and sensor noise.
+
+Everything is a function of the seed and the frame index: the same
+:class:`DriveConfig` renders the same frames in any order.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass
+from functools import lru_cache
+
+import cv2
+import numpy as np
+
+from speed_sign_detector.truth import TruthRow
+
+#: Lighting choices of a drive.
+LIGHTING_CHOICES: tuple[str, ...] = ('day', 'dusk', 'night', 'mixed')
+#: Darkness of each fixed lighting (0 = day, 0.5 = dusk, 1 = night).
+DARKNESS: dict[str, float] = {'day': 0.0, 'dusk': 0.5, 'night': 1.0}
+#: A sign is in the truth while its radius is at least this, pixels.
+MIN_TRUTH_RADIUS_PX = 5.0
+#: ... and at least this fraction of its box lies inside the image.
+MIN_TRUTH_VISIBLE_FRACTION = 0.75
+
+ROAD_LEFT_M, ROAD_RIGHT_M, LANE_WIDTH_M = -5.4, 1.8, 3.6
+GROUND_RESOLUTION_M = 0.05        # ground texture: metres per texel
+GROUND_HALF_WIDTH_M = 30.0        # ground texture spans X in [-30, 30] m
+GROUND_PERIOD_M = 60.0            # ... and repeats every 60 m along Z
+FOG_DISTANCE_M = 90.0             # ground fades into the far scene over this distance
+FAR_AZIMUTH_RAD = 1.2             # far scene texture spans azimuth [-1.2, 1.2] rad
+FAR_TAN_LOW, FAR_TAN_HIGH = -0.06, 0.7   # ... and tan(elevation) in this range
+FAR_SIZE = (700, 2400)            # far scene texture rows, columns
+
+
+@dataclass(frozen=True)
+class DriveConfig:
+    """Settings of one synthetic drive.
+
+    Attributes:
+        seed: random seed; the drive is a deterministic function of the config.
+        duration_s: length of the drive, seconds.
+        fps: camera rate, frames per second.
+        lighting: one of :data:`LIGHTING_CHOICES`.
+        width_px, height_px: image size.
+        focal_px: focal length, pixels.
+        speed_mps: mean forward speed, metres per second.
+        start_stamp_s: message time of the first frame, seconds since the epoch.
+        camera_height_m: camera height above the road.
+        base_pitch_deg: the camera's downward tilt.
+        lookalike_fraction: share of the sign slots that get a look-alike sign.
+        distractors: draw lamps, mirrors, the vehicle ahead and windscreen stickers.
+    """
+
+    seed: int = 0
+    duration_s: float = 20.0
+    fps: float = 30.0
+    lighting: str = 'day'
+    width_px: int = 640
+    height_px: int = 480
+    focal_px: float = 760.0
+    speed_mps: float = 12.0
+    start_stamp_s: float = 1_700_000_000.0
+    camera_height_m: float = 1.3
+    base_pitch_deg: float = 2.0
+    lookalike_fraction: float = 0.35
+    distractors: bool = True
+
+    def __post_init__(self) -> None:
+        if self.lighting not in LIGHTING_CHOICES:
+            raise ValueError(f'lighting must be one of {", ".join(LIGHTING_CHOICES)}, '
+                             f'got {self.lighting!r}')
+        if not 0.0 < self.duration_s <= 3600.0:
+            raise ValueError(f'duration_s must be in (0, 3600] seconds, got {self.duration_s}')
+        if not 1.0 <= self.fps <= 240.0:
+            raise ValueError(f'fps must be in [1, 240], got {self.fps}')
+        if not (64 <= self.width_px <= 4096 and 48 <= self.height_px <= 4096):
+            raise ValueError(f'image size {self.width_px}x{self.height_px} out of range '
+                             f'(64..4096 x 48..4096)')
+        if not 1.0 <= self.speed_mps <= 60.0:
+            raise ValueError(f'speed_mps must be in [1, 60], got {self.speed_mps}')
+        if not 0.0 <= self.lookalike_fraction <= 1.0:
+            raise ValueError(f'lookalike_fraction must be in [0, 1], got '
+                             f'{self.lookalike_fraction}')
+
+    @property
+    def frame_count(self) -> int:
+        """Number of frames of the drive."""
+        return max(1, int(round(self.duration_s * self.fps)))
+
+    def stamp_ns(self, frame: int) -> int:
+        """Message time of a frame, integer nanoseconds since the epoch."""
+        return int(round(self.start_stamp_s * 1e9)) + int(round(frame * 1e9 / self.fps))
+
+
+@dataclass(frozen=True)
+class SignPlacement:
+    """A sign standing beside the road.
+
+    Attributes:
+        track_id: the sign's id in the truth (1, 2, ...).
+        kind: a kind of :func:`speed_sign_detector.recognition.templates.render_sign`.
+        limit_kmh: the limit it sets, km/h; 0 when it is not a speed limit.
+        x_m, z_m: position of its centre across and along the road.
+        height_m: height of its centre above the road.
+        radius_m: outer radius of the sign plate.
+        yaw_deg: turn of the plate about the vertical axis (out-of-plane rotation).
+        roll_deg: in-plane rotation of the plate.
+        fading: 0 = new plate, up to ~0.3 = weathered (washed-out colours).
+    """
+
+    track_id: int
+    kind: str
+    limit_kmh: int
+    x_m: float
+    z_m: float
+    height_m: float
+    radius_m: float
+    yaw_deg: float
+    roll_deg: float
+    fading: float
+
+
+@dataclass(frozen=True)
+class SyntheticFrame:
+    """One rendered frame.
+
+    Attributes:
+        index: 0-based frame index.
+        stamp_ns: message time, nanoseconds since the epoch.
+        bgr: the image, (H, W, 3) uint8, BGR.
+        truth: the signs in view (see :mod:`speed_sign_detector.truth`).
+        darkness: lighting of the frame, 0 = day, 0.5 = dusk, 1 = night.
+    """
+
+    index: int
+    stamp_ns: int
+    bgr: np.ndarray
+    truth: tuple[TruthRow, ...]
+    darkness: float
+
+    @property
+    def stamp_s(self) -> float:
+        """Message time, seconds."""
+        return self.stamp_ns * 1e-9
+
+
+@dataclass(frozen=True)
+class _Pose:
+    x_m: float
+    z_m: float
+    yaw_rad: float
+    pitch_rad: float
+    yaw_rate: float     # rad/s
+    pitch_rate: float   # rad/s
+
+
+@dataclass(frozen=True)
+class _SignView:
+    """Where a sign appears in one frame: centre (px), radius (px), horizontal squeeze
+    (out-of-plane rotation) and its truth box (None when too small or mostly outside)."""
+
+    u_px: float
+    v_px: float
+    radius_px: float
+    width_factor: float
+    box: tuple[float, float, float, float] | None
+
+
+@dataclass(frozen=True)
+class _Prop:
+    """A roadside object: 'tree', 'lamp', 'mirror' or 'bush'."""
+
+    kind: str
+    x_m: float
+    z_m: float
+    size_m: float
+    shade: float
+
+
+@lru_cache(maxsize=4096)
+def _sign_image(kind: str, diameter_px: int) -> tuple[np.ndarray, np.ndarray]:
+    """Rendered sign (premultiplied BGR float32 (D,D,3), alpha float32 (D,D)), cached."""
+    from speed_sign_detector.recognition.templates import render_sign
+
+    bgr, alpha = render_sign(kind, diameter_px)
+    return bgr.astype(np.float32), alpha.astype(np.float32)
+
+
+def sign_kinds() -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """(speed-limit kinds, look-alike kinds) that the sign renderer can draw."""
+    from speed_sign_detector.recognition.templates import SIGN_KINDS
+
+    limits = tuple(kind for kind in SIGN_KINDS if kind.isdigit() and int(kind) > 0)
+    lookalikes = tuple(kind for kind in SIGN_KINDS if not kind.isdigit())
+    return limits, lookalikes
+
+
+class SyntheticDrive:
+    """A deterministic synthetic drive; render any frame with :meth:`frame`.
+
+    Example:
+        >>> drive = SyntheticDrive(DriveConfig(seed=3, duration_s=1.0, fps=5))
+        >>> frame = drive.frame(0)
+        >>> frame.bgr.shape
+        (480, 640, 3)
+    """
+
+    def __init__(self, config: DriveConfig | None = None) -> None:
+        self.config = config or DriveConfig()
+        config = self.config
+        rng = np.random.default_rng([config.seed, 1])
+        self._phases = rng.uniform(0.0, 2.0 * math.pi, 8)
+        self._speed_wobble = rng.uniform(0.03, 0.08)
+        self.signs: tuple[SignPlacement, ...] = self._place_signs(rng)
+        self._props: tuple[_Prop, ...] = self._place_props(rng) if config.distractors else ()
+        self._lead_vehicle = (self._plan_lead_vehicle(rng) if config.distractors else None)
+        self._stickers = self._plan_stickers(rng) if config.distractors else ()
+        self._ground = _ground_texture(np.random.default_rng([config.seed, 2]))
+        self._far = _far_texture(np.random.default_rng([config.seed, 3]))
+        width, height = config.width_px, config.height_px
+        cols, rows = np.meshgrid(np.arange(width, dtype=np.float32) + 0.5,
+                                 np.arange(height, dtype=np.float32) + 0.5)
+        self._ray_x = (cols - width / 2.0) / config.focal_px
+        self._ray_y = (rows - height / 2.0) / config.focal_px
+        self._headlight = _headlight_pool(width, height)
+
+    # ----------------------------------------------------------------- public API
+    @property
+    def frame_count(self) -> int:
+        """Number of frames of the drive."""
+        return self.config.frame_count
+
+    def __iter__(self) -> Iterator[SyntheticFrame]:
+        for index in range(self.frame_count):
+            yield self.frame(index)
+
+    def darkness(self, time_s: float) -> float:
+        """Lighting at a time: 0 = day, 0.5 = dusk, 1 = night."""
+        if self.config.lighting == 'mixed':
+            return float(np.clip(time_s / max(self.config.duration_s, 1e-6), 0.0, 1.0))
+        return DARKNESS[self.config.lighting]
+
+    def truth(self, index: int) -> tuple[TruthRow, ...]:
+        """The truth rows of one frame (cheap: no rendering)."""
+        time_s = index / self.config.fps
+        pose = self._pose(time_s)
+        stamp_s = self.config.stamp_ns(index) * 1e-9
+        rows = []
+        for sign in self.signs:
+            view = self._sign_view(sign, pose)
+            if view is not None and view.box is not None:
+                rows.append(TruthRow(stamp_s, index, sign.track_id, sign.kind, sign.limit_kmh,
+                                     *view.box))
+        return tuple(rows)
+
+    def frame(self, index: int) -> SyntheticFrame:
+        """Render frame ``index`` (0-based) with its truth."""
+        config = self.config
+        if not 0 <= index < self.frame_count:
+            raise IndexError(f'frame {index} outside the drive (0..{self.frame_count - 1})')
+        time_s = index / config.fps
+        pose = self._pose(time_s)
+        darkness = self.darkness(time_s)
+        night = float(np.clip((darkness - 0.5) * 2.0, 0.0, 1.0))
+        exposure_s = (0.35 + 0.55 * darkness) / config.fps
+        rng = np.random.default_rng([config.seed, 4, index])
+
+        image = self._background(pose)
+        self._draw_props(image, pose, night, emissive=False)
+        self._draw_lead_vehicle(image, time_s, pose, night, emissive=False)
+        self._draw_stickers(image)
+        image = _apply_lighting(image, darkness, self._headlight)
+        rows = []
+        for sign in sorted(self.signs, key=lambda s: -(s.z_m - pose.z_m)):
+            view = self._sign_view(sign, pose)
+            if view is None:
+                continue
+            self._draw_sign(image, sign, view, pose, darkness, exposure_s)
+            if view.box is not None:
+                rows.append(TruthRow(config.stamp_ns(index) * 1e-9, index, sign.track_id,
+                                     sign.kind, sign.limit_kmh, *view.box))
+        self._draw_props(image, pose, night, emissive=True)
+        self._draw_lead_vehicle(image, time_s, pose, night, emissive=True)
+        image = _shake_blur(image, pose, config.focal_px, exposure_s)
+        noise_sigma = 1.5 + 4.5 * darkness
+        image += rng.standard_normal(image.shape, dtype=np.float32) * noise_sigma
+        bgr = np.clip(image, 0.0, 255.0).astype(np.uint8)
+        rows.sort(key=lambda row: row.track_id)
+        return SyntheticFrame(index, config.stamp_ns(index), bgr, tuple(rows), darkness)
+
+    # ------------------------------------------------------------------ layout
+    def _place_signs(self, rng: np.random.Generator) -> tuple[SignPlacement, ...]:
+        """Signs at increasing Z; each is passed before the drive ends."""
+        config = self.config
+        limit_kinds, lookalike_kinds = sign_kinds()
+        half_width_px = config.width_px / 2.0
+        road_end_m = config.speed_mps * config.duration_s
+        signs: list[SignPlacement] = []
+        exit_time_s = 1.8 + rng.uniform(0.0, 0.4)
+        previous_limit = ''
+        while True:
+            is_limit = not signs or rng.uniform() >= config.lookalike_fraction
+            radius_m = float(rng.choice([0.32, 0.36, 0.40]))
+            if is_limit or rng.uniform() < 0.7:
+                x_m = float(rng.uniform(2.2, 2.7))
+            else:
+                x_m = float(rng.uniform(-6.2, -5.8))
+            # Z where the sign's outer edge leaves the image (straight ahead camera).
+            exit_offset_m = config.focal_px * (abs(x_m) + radius_m) / half_width_px
+            z_m = config.speed_mps * exit_time_s + exit_offset_m
+            if z_m - exit_offset_m > road_end_m - 0.1 * config.speed_mps:
+                break
+            if is_limit:
+                choices = [kind for kind in limit_kinds if kind != previous_limit]
+                kind = str(rng.choice(choices))
+                previous_limit = kind
+                limit_kmh = int(kind)
+            else:
+                ends = [kind for kind in lookalike_kinds if kind.startswith('end_of_limit')]
+                others = [kind for kind in lookalike_kinds if kind not in ends] or ends
+                kind = str(rng.choice(ends if rng.uniform() < 0.5 else others))
+                limit_kmh = 0
+            signs.append(SignPlacement(
+                track_id=len(signs) + 1, kind=kind, limit_kmh=limit_kmh, x_m=x_m, z_m=z_m,
+                height_m=float(rng.uniform(2.2, 2.6)), radius_m=radius_m,
+                yaw_deg=float(rng.uniform(-20.0, 20.0)), roll_deg=float(rng.uniform(-4, 4)),
+                fading=float(rng.uniform(0.0, 0.3))))
+            exit_time_s += rng.uniform(2.6, 4.2)
+        return tuple(signs)
+
+    def _place_props(self, rng: np.random.Generator) -> tuple[_Prop, ...]:
+        config = self.config
+        road_end_m = config.speed_mps * config.duration_s + 200.0
+        props: list[_Prop] = []
+        z_m = 5.0
+        while z_m < road_end_m:
+            side = 1.0 if rng.uniform() < 0.5 else -1.0
+            x_m = (ROAD_RIGHT_M + rng.uniform(3.0, 12.0) if side > 0
+                   else ROAD_LEFT_M - rng.uniform(2.5, 12.0))
+            kind = 'tree' if rng.uniform() < 0.75 else 'bush'
+            props.append(_Prop(kind, float(x_m), float(z_m), float(rng.uniform(2.0, 5.0)),
+                               float(rng.uniform(0.6, 1.2))))
+            z_m += float(rng.uniform(4.0, 14.0))
+        z_m = float(rng.uniform(10.0, 40.0))
+        while z_m < road_end_m:
+            props.append(_Prop('lamp', ROAD_LEFT_M - 0.8 if rng.uniform() < 0.5
+                               else ROAD_RIGHT_M + 1.6, z_m, 0.22, 1.0))
+            z_m += float(rng.uniform(35.0, 60.0))
+        z_m = float(rng.uniform(40.0, 120.0))
+        while z_m < road_end_m:
+            props.append(_Prop('mirror', ROAD_LEFT_M - 1.0, z_m, 0.4, 1.0))
+            z_m += float(rng.uniform(120.0, 250.0))
+        return tuple(props)
+
+    def _plan_lead_vehicle(self, rng: np.random.Generator) -> tuple[float, float, float]:
+        """(start time s, end time s, shade) of the vehicle driving ahead in our lane."""
+        duration_s = self.config.duration_s
+        start_s = float(rng.uniform(0.0, 0.4)) * duration_s
+        return start_s, start_s + float(rng.uniform(0.3, 0.6)) * duration_s, float(
+            rng.uniform(0.5, 1.0))
+
+    def _plan_stickers(self, rng: np.random.Generator) -> tuple[tuple[int, int, int, int], ...]:
+        """Windscreen stickers: (x px, y px, radius px, style)."""
+        width, height = self.config.width_px, self.config.height_px
+        return ((int(width * rng.uniform(0.78, 0.92)), int(height * rng.uniform(0.05, 0.15)),
+                 int(rng.uniform(12, 18)), 0),
+                (int(width * rng.uniform(0.05, 0.2)), int(height * rng.uniform(0.85, 0.93)),
+                 int(rng.uniform(16, 24)), 1))
+
+    # ------------------------------------------------------------------ camera
+    def _pose(self, time_s: float) -> _Pose:
+        config = self.config
+        p = self._phases
+        omega = 2.0 * math.pi
+        z_m = config.speed_mps * (time_s + self._speed_wobble
+                                  * math.sin(omega * 0.07 * time_s + p[0]) / (omega * 0.07))
+        x_m = 0.15 * math.sin(omega * 0.09 * time_s + p[1])
+        yaw = math.radians(0.5 * math.sin(omega * 0.23 * time_s + p[2])
+                           + 0.15 * math.sin(omega * 1.1 * time_s + p[3]))
+        yaw_rate = math.radians(0.5 * omega * 0.23 * math.cos(omega * 0.23 * time_s + p[2])
+                                + 0.15 * omega * 1.1 * math.cos(omega * 1.1 * time_s + p[3]))
+        pitch = math.radians(config.base_pitch_deg + 0.25 * math.sin(omega * 1.7 * time_s + p[4])
+                             + 0.12 * math.sin(omega * 4.3 * time_s + p[5]))
+        pitch_rate = math.radians(0.25 * omega * 1.7 * math.cos(omega * 1.7 * time_s + p[4])
+                                  + 0.12 * omega * 4.3 * math.cos(omega * 4.3 * time_s + p[5]))
+        return _Pose(x_m, z_m, yaw, pitch, yaw_rate, pitch_rate)
+
+    def _project(self, pose: _Pose, x_m: float, y_m: float, z_m: float
+                 ) -> tuple[float, float, float] | None:
+        """World point (Y down from the camera height) -> (u px, v px, depth m)."""
+        dx, dz = x_m - pose.x_m, z_m - pose.z_m
+        cos_yaw, sin_yaw = math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)
+        x1 = cos_yaw * dx - sin_yaw * dz
+        z1 = sin_yaw * dx + cos_yaw * dz
+        cos_p, sin_p = math.cos(pose.pitch_rad), math.sin(pose.pitch_rad)
+        y2 = cos_p * y_m - sin_p * z1
+        z2 = sin_p * y_m + cos_p * z1
+        if z2 < 0.5:
+            return None
+        focal = self.config.focal_px
+        return (self.config.width_px / 2.0 + focal * x1 / z2,
+                self.config.height_px / 2.0 + focal * y2 / z2, z2)
+
+    # ------------------------------------------------------------------ drawing
+    def _background(self, pose: _Pose) -> np.ndarray:
+        """Road, verges and far scene by casting a ray through every pixel."""
+        config = self.config
+        cos_p, sin_p = math.cos(pose.pitch_rad), math.sin(pose.pitch_rad)
+        cos_y, sin_y = math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)
+        # Ray in camera coordinates (x, y, 1) -> world: yaw(pitch(ray)).
+        ray_y = cos_p * self._ray_y + sin_p
+        ray_z1 = -sin_p * self._ray_y + cos_p
+        ray_x = cos_y * self._ray_x + sin_y * ray_z1
+        ray_z = -sin_y * self._ray_x + cos_y * ray_z1
+        horizontal = np.sqrt(ray_x * ray_x + ray_z * ray_z)
+        # Far scene: azimuth and tan(elevation).
+        azimuth = np.arctan2(ray_x, ray_z)
+        tan_elevation = -ray_y / horizontal
+        far_map_x = ((azimuth + FAR_AZIMUTH_RAD) / (2 * FAR_AZIMUTH_RAD) * FAR_SIZE[1]
+                     ).astype(np.float32)
+        far_map_y = ((FAR_TAN_HIGH - tan_elevation) / (FAR_TAN_HIGH - FAR_TAN_LOW)
+                     * FAR_SIZE[0]).astype(np.float32)
+        far = cv2.remap(self._far, far_map_x, far_map_y, cv2.INTER_LINEAR,
+                        borderMode=cv2.BORDER_REPLICATE)
+        # Ground: intersect with the plane Y = camera height.
+        below = ray_y > 1e-4
+        distance = np.where(below, config.camera_height_m / np.maximum(ray_y, 1e-4), 1e4)
+        ground_x = pose.x_m + distance * ray_x
+        ground_z = pose.z_m + distance * ray_z
+        texels = 1.0 / GROUND_RESOLUTION_M
+        map_x = np.clip((ground_x + GROUND_HALF_WIDTH_M) * texels, 0,
+                        self._ground.shape[1] - 1).astype(np.float32)
+        map_y = (np.mod(ground_z, GROUND_PERIOD_M) * texels).astype(np.float32)
+        ground = cv2.remap(self._ground, map_x, map_y, cv2.INTER_LINEAR,
+                           borderMode=cv2.BORDER_WRAP)
+        weight = np.exp(-(distance * horizontal) / FOG_DISTANCE_M) * below
+        weight = weight[..., None].astype(np.float32)
+        return ground * weight + far * (1.0 - weight)
+
+    def _draw_props(self, image: np.ndarray, pose: _Pose, night: float, emissive: bool) -> None:
+        height_m = self.config.camera_height_m
+        visible = [prop for prop in self._props if 1.0 < prop.z_m - pose.z_m < 150.0]
+        for prop in sorted(visible, key=lambda prop: -(prop.z_m - pose.z_m)):
+            base = self._project(pose, prop.x_m, height_m, prop.z_m)
+            if base is None:
+                continue
+            u_px, v_px, depth_m = base
+            scale = self.config.focal_px / depth_m
+            if u_px < -400 or u_px > self.config.width_px + 400:
+                continue
+            if prop.kind == 'tree' and not emissive:
+                trunk_w = max(1, int(0.25 * scale))
+                crown_r = prop.size_m * 0.45 * scale
+                top_v = v_px - prop.size_m * 1.3 * scale
+                _fill_rect(image, u_px - trunk_w / 2, top_v, u_px + trunk_w / 2, v_px,
+                           (40 * prop.shade, 55 * prop.shade, 75 * prop.shade))
+                _fill_ellipse(image, u_px, top_v - 0.2 * crown_r, crown_r, 1.2 * crown_r,
+                              (45 * prop.shade, 100 * prop.shade, 60 * prop.shade))
+                _fill_ellipse(image, u_px - 0.3 * crown_r, top_v - 0.5 * crown_r,
+                              0.5 * crown_r, 0.6 * crown_r,
+                              (60 * prop.shade, 125 * prop.shade, 80 * prop.shade))
+            elif prop.kind == 'bush' and not emissive:
+                radius = prop.size_m * 0.3 * scale
+                _fill_ellipse(image, u_px, v_px - 0.6 * radius, 1.4 * radius, 0.8 * radius,
+                              (40 * prop.shade, 90 * prop.shade, 55 * prop.shade))
+            elif prop.kind == 'lamp':
+                top_v = v_px - 5.0 * scale
+                globe_r = prop.size_m * scale
+                if not emissive:
+                    _fill_rect(image, u_px - 0.06 * scale, top_v, u_px + 0.06 * scale, v_px,
+                               (105, 105, 110))
+                    _fill_ellipse(image, u_px, top_v - globe_r, globe_r, globe_r,
+                                  (215, 220, 220))
+                elif night > 0.0:
+                    _add_glow(image, u_px, top_v - globe_r, globe_r, 200.0 * night)
+            elif prop.kind == 'mirror' and not emissive:
+                top_v = v_px - 2.4 * scale
+                radius = prop.size_m * scale
+                _fill_rect(image, u_px - 0.05 * scale, top_v, u_px + 0.05 * scale, v_px,
+                           (110, 110, 110))
+                _fill_ellipse(image, u_px, top_v, radius, radius, (20, 90, 230))
+                _fill_ellipse(image, u_px, top_v, 0.8 * radius, 0.8 * radius, (150, 140, 130))
+                _fill_ellipse(image, u_px - 0.2 * radius, top_v - 0.2 * radius,
+                              0.4 * radius, 0.3 * radius, (200, 190, 180))
+
+    def _draw_lead_vehicle(self, image: np.ndarray, time_s: float, pose: _Pose, night: float,
+                           emissive: bool) -> None:
+        if self._lead_vehicle is None:
+            return
+        start_s, end_s, shade = self._lead_vehicle
+        if not start_s <= time_s <= end_s:
+            return
+        phase = (time_s - start_s) / max(end_s - start_s, 1e-6)
+        gap_m = 14.0 + 40.0 * (1.0 - math.sin(math.pi * phase)) ** 2
+        z_m = pose.z_m + gap_m
+        height_m = self.config.camera_height_m
+        base = self._project(pose, 0.0, height_m, z_m)
+        if base is None:
+            return
+        u_px, v_px, depth_m = base
+        scale = self.config.focal_px / depth_m
+        half_w, body_h = 0.95 * scale, 1.7 * scale
+        wheel_v = v_px - 0.85 * scale
+        light_r = 0.09 * scale
+        lights = ((u_px - 0.75 * scale, v_px - 1.0 * scale), (u_px + 0.75 * scale,
+                                                             v_px - 1.0 * scale))
+        if not emissive:
+            _fill_rect(image, u_px - half_w, v_px - body_h, u_px + half_w, v_px - 0.25 * scale,
+                       (150 * shade, 150 * shade, 140 * shade))
+            _fill_rect(image, u_px - half_w, v_px - 0.45 * scale, u_px + half_w, v_px,
+                       (30, 30, 30))
+            _fill_ellipse(image, u_px, wheel_v, 0.36 * scale, 0.36 * scale, (25, 25, 25))
+            _fill_ellipse(image, u_px, wheel_v, 0.2 * scale, 0.2 * scale, (170, 170, 175))
+            _fill_ellipse(image, u_px, wheel_v, 0.05 * scale, 0.05 * scale, (60, 60, 60))
+            for light_u, light_v in lights:
+                _fill_ellipse(image, light_u, light_v, light_r, light_r, (40, 40, 170))
+        elif night > 0.0:
+            for light_u, light_v in lights:
+                _add_glow(image, light_u, light_v, light_r, 180.0 * night, colour=(0.3, 0.3, 1.0))
+
+    def _draw_stickers(self, image: np.ndarray) -> None:
+        for x_px, y_px, radius, style in self._stickers:
+            if style == 0:   # blue parking sticker with a white rim
+                _fill_ellipse(image, x_px, y_px, radius, radius, (230, 230, 230))
+                _fill_ellipse(image, x_px, y_px, 0.8 * radius, 0.8 * radius, (170, 90, 30))
+            else:            # round dashboard dial
+                _fill_ellipse(image, x_px, y_px, radius, radius, (35, 35, 35))
+                _fill_ellipse(image, x_px, y_px, 0.85 * radius, 0.85 * radius, (90, 90, 90))
+
+    def _sign_view(self, sign: SignPlacement, pose: _Pose) -> _SignView | None:
+        """Where the sign appears, or None when it is behind the camera or off-image."""
+        y_m = self.config.camera_height_m - sign.height_m
+        projected = self._project(pose, sign.x_m, y_m, sign.z_m)
+        if projected is None:
+            return None
+        u_px, v_px, depth_m = projected
+        radius_px = self.config.focal_px * sign.radius_m / depth_m
+        view_angle = math.atan2(sign.x_m - pose.x_m, sign.z_m - pose.z_m)
+        width_factor = max(0.2, math.cos(view_angle - math.radians(sign.yaw_deg)))
+        roll = math.radians(sign.roll_deg)
+        half_w = radius_px * math.hypot(width_factor * math.cos(roll), math.sin(roll))
+        half_h = radius_px * math.hypot(width_factor * math.sin(roll), math.cos(roll))
+        width, height = self.config.width_px, self.config.height_px
+        if (u_px + half_w < 0 or u_px - half_w > width or v_px + half_h < 0
+                or v_px - half_h > height):
+            return None
+        box = (u_px - half_w, v_px - half_h, u_px + half_w, v_px + half_h)
+        inside_w = max(0.0, min(box[2], width) - max(box[0], 0.0))
+        inside_h = max(0.0, min(box[3], height) - max(box[1], 0.0))
+        fraction = inside_w * inside_h / max((box[2] - box[0]) * (box[3] - box[1]), 1e-9)
+        visible = radius_px >= MIN_TRUTH_RADIUS_PX and fraction >= MIN_TRUTH_VISIBLE_FRACTION
+        return _SignView(u_px, v_px, radius_px, width_factor, box if visible else None)
+
+    def _draw_sign(self, image: np.ndarray, sign: SignPlacement, view: _SignView,
+                   pose: _Pose, darkness: float, exposure_s: float) -> None:
+        """Pole, then the plate: warped, motion-blurred, lit, alpha-composited."""
+        u_px, v_px, radius_px, width_factor = (view.u_px, view.v_px, view.radius_px,
+                                               view.width_factor)
+        height_m = self.config.camera_height_m
+        # Pole from the ground to the plate (part of the lit scene).
+        ground = self._project(pose, sign.x_m, height_m, sign.z_m)
+        night = float(np.clip((darkness - 0.5) * 2.0, 0.0, 1.0))
+        background_gain = _background_gain(darkness)
+        if ground is not None:
+            pole_half_w = max(0.6, 0.04 * self.config.focal_px / ground[2])
+            _fill_rect(image, u_px - pole_half_w, v_px, u_px + pole_half_w, ground[1],
+                       tuple(c * background_gain for c in (120.0, 125.0, 125.0)))
+        if radius_px < 1.5:
+            return
+        diameter = max(4, int(round(2.0 * radius_px)))
+        sign_bgr, sign_alpha = _sign_image(sign.kind, diameter)
+        # Forward-motion blur: where the sign was at the start of the exposure.
+        earlier = _Pose(pose.x_m, pose.z_m - self.config.speed_mps * exposure_s, pose.yaw_rad,
+                        pose.pitch_rad, 0.0, 0.0)
+        before = self._project(earlier, sign.x_m, height_m - sign.height_m, sign.z_m)
+        blur = (u_px - before[0], v_px - before[1]) if before is not None else (0.0, 0.0)
+        pad = int(math.ceil(abs(blur[0]) + abs(blur[1]))) + 3
+        size = diameter + 2 * pad
+        # Affine map from the rendered sign to the patch: roll, squeeze, sub-pixel shift.
+        roll = math.radians(sign.roll_deg)
+        scale = 2.0 * radius_px / diameter
+        linear = np.array([[math.cos(roll), -math.sin(roll)], [math.sin(roll), math.cos(roll)]]
+                          ) @ np.diag([width_factor * scale, scale])
+        origin_u, origin_v = math.floor(u_px) - size // 2, math.floor(v_px) - size // 2
+        centre_patch = np.array([u_px - origin_u, v_px - origin_v])
+        offset = centre_patch - linear @ np.array([diameter / 2.0, diameter / 2.0])
+        matrix = np.hstack([linear, offset[:, None]]).astype(np.float64)
+        premultiplied = cv2.warpAffine(sign_bgr, matrix, (size, size), flags=cv2.INTER_LINEAR)
+        alpha = cv2.warpAffine(sign_alpha, matrix, (size, size), flags=cv2.INTER_LINEAR)
+        kernel = _line_kernel(*blur)
+        if kernel is not None:
+            premultiplied = cv2.filter2D(premultiplied, -1, kernel)
+            alpha = cv2.filter2D(alpha, -1, kernel)
+        # Lighting of the plate: sun, dusk, or headlights on retro-reflecting foil.
+        depth_m = self.config.focal_px * sign.radius_m / radius_px
+        headlight_gain = 0.3 + 0.45 * min(1.0, 18.0 / depth_m)
+        gain = (1.0 - night) * (1.0 - 0.45 * min(darkness, 0.5) * 2.0) + night * headlight_gain
+        fading = sign.fading + 0.3 * night   # washed out and low contrast
+        mean_colour = premultiplied.reshape(-1, 3).sum(axis=0) / max(float(alpha.sum()), 1e-6)
+        lit = gain * ((1.0 - fading) * premultiplied + fading * alpha[..., None] * mean_colour)
+        _composite(image, origin_u, origin_v, lit, alpha)
+
+
+# ---------------------------------------------------------------------- textures
+def _periodic_noise(rng: np.random.Generator, shape: tuple[int, int], sigma_px: float
+                    ) -> np.ndarray:
+    """Smooth noise, zero mean, unit-ish std, periodic in both axes (float32)."""
+    noise = rng.standard_normal(shape).astype(np.float32)
+    pad = int(3 * sigma_px) + 1
+    padded = np.pad(noise, pad, mode='wrap')
+    blurred = cv2.GaussianBlur(padded, (0, 0), sigma_px)[pad:-pad, pad:-pad]
+    return blurred / max(float(blurred.std()), 1e-6)
+
+
+def _ground_texture(rng: np.random.Generator) -> np.ndarray:
+    """Road and verges seen from above: (rows along Z, columns along X, 3) float32 BGR."""
+    rows = int(round(GROUND_PERIOD_M / GROUND_RESOLUTION_M))
+    cols = int(round(2 * GROUND_HALF_WIDTH_M / GROUND_RESOLUTION_M))
+    x_m = (np.arange(cols, dtype=np.float32) + 0.5) * GROUND_RESOLUTION_M - GROUND_HALF_WIDTH_M
+    z_m = (np.arange(rows, dtype=np.float32) + 0.5) * GROUND_RESOLUTION_M
+    fine = _periodic_noise(rng, (rows, cols), 0.7)
+    coarse = _periodic_noise(rng, (rows, cols), 12.0)
+    texture = np.empty((rows, cols, 3), np.float32)
+    # Grass verges.
+    grass = np.array([55.0, 105.0, 80.0], np.float32)
+    texture[:] = grass * (1.0 + 0.18 * coarse[..., None] + 0.12 * fine[..., None])
+    # Gravel shoulders.
+    shoulder = ((x_m > ROAD_RIGHT_M) & (x_m < ROAD_RIGHT_M + 0.8)) | (
+        (x_m < ROAD_LEFT_M) & (x_m > ROAD_LEFT_M - 0.6))
+    texture[:, shoulder] = (np.array([110.0, 120.0, 125.0], np.float32)
+                            * (1.0 + 0.15 * fine[:, shoulder, None]))
+    # Asphalt with patches and cracks.
+    road = (x_m >= ROAD_LEFT_M) & (x_m <= ROAD_RIGHT_M)
+    asphalt = 95.0 + 9.0 * coarse[:, road] + 7.0 * fine[:, road]
+    texture[:, road] = asphalt[..., None] * np.array([1.0, 0.98, 0.96], np.float32)
+    # Markings: solid edge lines, dashed centre line (3 m dash every 12 m).
+    paint = np.array([210.0, 212.0, 215.0], np.float32)
+    for centre_m in (ROAD_RIGHT_M - 0.1, ROAD_LEFT_M + 0.1):
+        texture[:, np.abs(x_m - centre_m) < 0.075] = paint
+    dash_rows = np.mod(z_m, 12.0) < 3.0
+    centre_cols = np.abs(x_m - (ROAD_RIGHT_M - LANE_WIDTH_M)) < 0.075
+    texture[np.ix_(dash_rows, centre_cols)] = paint
+    return np.clip(texture * (1.0 + 0.04 * fine[..., None]), 0, 255).astype(np.float32)
+
+
+def _far_texture(rng: np.random.Generator) -> np.ndarray:
+    """Sky, clouds and the far treeline/buildings: (rows = tan elevation high->low,
+    columns = azimuth, 3) float32 BGR."""
+    rows, cols = FAR_SIZE
+    tan_e = FAR_TAN_HIGH - (np.arange(rows, dtype=np.float32) + 0.5) / rows * (
+        FAR_TAN_HIGH - FAR_TAN_LOW)
+    sky_t = np.clip(tan_e / 0.5, 0.0, 1.0)[:, None, None]
+    horizon_colour = np.array([225.0, 210.0, 195.0], np.float32)
+    zenith_colour = np.array([205.0, 150.0, 95.0], np.float32)
+    texture = np.broadcast_to(horizon_colour * (1 - sky_t) + zenith_colour * sky_t,
+                              (rows, cols, 3)).copy()
+    clouds = _periodic_noise(rng, (rows, cols), 25.0)
+    cloud_weight = np.clip(clouds - 0.6, 0.0, 1.0)[..., None] * 0.8
+    texture = texture * (1 - cloud_weight) + 240.0 * cloud_weight
+    # Skyline: smooth treeline with blocks of buildings.
+    profile = _periodic_noise(rng, (1, cols), 15.0)[0]
+    skyline = 0.015 + 0.012 * (profile - profile.min())
+    block = 0
+    while block < cols:
+        width = int(rng.integers(40, 160))
+        if rng.uniform() < 0.25:
+            skyline[block:block + width] = np.maximum(skyline[block:block + width],
+                                                      rng.uniform(0.03, 0.07))
+        block += width
+    fine = _periodic_noise(rng, (rows, cols), 1.5)
+    below = tan_e[:, None] < skyline[None, :]
+    treeline = np.array([60.0, 80.0, 65.0], np.float32) * (1.0 + 0.2 * fine[..., None])
+    texture[below] = treeline[below]
+    return np.ascontiguousarray(texture, dtype=np.float32)
+
+
+def _headlight_pool(width: int, height: int) -> np.ndarray:
+    """Relative illumination of the headlights, (H, W) float32 in [0, 1]."""
+    cols, rows = np.meshgrid(np.linspace(-1.0, 1.0, width, dtype=np.float32),
+                             np.linspace(0.0, 1.0, height, dtype=np.float32))
+    pool = np.exp(-(cols / 0.55) ** 2) * np.clip((rows - 0.45) / 0.25, 0.0, 1.0)
+    return pool.astype(np.float32)
+
+
+# ---------------------------------------------------------------------- lighting
+def _background_gain(darkness: float) -> float:
+    """Overall brightness of the scene: 1 by day, ~0.55 at dusk, ~0.12 at night."""
+    if darkness <= 0.5:
+        return 1.0 - 0.9 * darkness
+    return 0.55 - 0.86 * (darkness - 0.5)
+
+
+def _apply_lighting(image: np.ndarray, darkness: float, headlight: np.ndarray) -> np.ndarray:
+    """Scene brightness, dusk tint, night headlights and raised black level."""
+    dusk = 1.0 - abs(darkness - 0.5) * 2.0
+    night = float(np.clip((darkness - 0.5) * 2.0, 0.0, 1.0))
+    tint = np.array([1.0 - 0.25 * dusk + 0.05 * night, 1.0 - 0.08 * dusk,
+                     1.0 + 0.06 * dusk - 0.05 * night], np.float32)
+    gain = _background_gain(darkness) + night * 0.45 * headlight
+    lit = image * gain[..., None] * tint
+    return lit + 10.0 * night
+
+
+def _shake_blur(image: np.ndarray, pose: _Pose, focal_px: float, exposure_s: float
+                ) -> np.ndarray:
+    """Blur along the image motion caused by the camera's rotation."""
+    kernel = _line_kernel(focal_px * pose.yaw_rate * exposure_s,
+                          focal_px * pose.pitch_rate * exposure_s)
+    return image if kernel is None else cv2.filter2D(image, -1, kernel)
+
+
+def _line_kernel(dx_px: float, dy_px: float) -> np.ndarray | None:
+    """Normalised kernel of a straight motion path, None when shorter than a pixel."""
+    length = math.hypot(dx_px, dy_px)
+    if length < 1.0:
+        return None
+    size = 2 * int(math.ceil(length / 2.0)) + 1
+    kernel = np.zeros((size, size), np.float32)
+    centre = size // 2
+    steps = max(2, int(math.ceil(length * 4)))
+    for t in np.linspace(-0.5, 0.5, steps):
+        x, y = centre + t * dx_px, centre + t * dy_px
+        x0, y0 = int(math.floor(x)), int(math.floor(y))
+        fx, fy = x - x0, y - y0
+        for xi, yi, w in ((x0, y0, (1 - fx) * (1 - fy)), (x0 + 1, y0, fx * (1 - fy)),
+                          (x0, y0 + 1, (1 - fx) * fy), (x0 + 1, y0 + 1, fx * fy)):
+            if 0 <= xi < size and 0 <= yi < size:
+                kernel[yi, xi] += w
+    return kernel / kernel.sum()
+
+
+# ---------------------------------------------------------------------- primitives
+def _fill_rect(image: np.ndarray, x1: float, y1: float, x2: float, y2: float,
+               colour: tuple[float, ...]) -> None:
+    height, width = image.shape[:2]
+    left, right = max(0, int(round(x1))), min(width, int(round(x2)))
+    top, bottom = max(0, int(round(y1))), min(height, int(round(y2)))
+    if right <= left:
+        right = min(width, left + 1)
+    if right > left and bottom > top:
+        image[top:bottom, left:right] = colour
+
+
+def _fill_ellipse(image: np.ndarray, x: float, y: float, rx: float, ry: float,
+                  colour: tuple[float, ...]) -> None:
+    """Anti-aliased filled ellipse (sub-pixel centre and radii) on a float image."""
+    if rx < 0.3 or ry < 0.3:
+        return
+    height, width = image.shape[:2]
+    left, right = max(0, int(x - rx - 1)), min(width, int(x + rx + 2))
+    top, bottom = max(0, int(y - ry - 1)), min(height, int(y + ry + 2))
+    if right <= left or bottom <= top:
+        return
+    cols = np.arange(left, right, dtype=np.float32) + 0.5 - x
+    rows = np.arange(top, bottom, dtype=np.float32) + 0.5 - y
+    distance = np.sqrt((cols[None, :] / rx) ** 2 + (rows[:, None] / ry) ** 2)
+    coverage = np.clip((1.0 - distance) * min(rx, ry) + 0.5, 0.0, 1.0)[..., None]
+    region = image[top:bottom, left:right]
+    region[:] = region * (1.0 - coverage) + np.asarray(colour, np.float32) * coverage
+
+
+def _add_glow(image: np.ndarray, x: float, y: float, radius: float, strength: float,
+              colour: tuple[float, float, float] = (0.8, 0.95, 1.0)) -> None:
+    """Emissive light: a bright disc with a soft halo, added to the image."""
+    reach = radius * 4.0 + 3.0
+    height, width = image.shape[:2]
+    left, right = max(0, int(x - reach)), min(width, int(x + reach + 1))
+    top, bottom = max(0, int(y - reach)), min(height, int(y + reach + 1))
+    if right <= left or bottom <= top:
+        return
+    cols = np.arange(left, right, dtype=np.float32) + 0.5 - x
+    rows = np.arange(top, bottom, dtype=np.float32) + 0.5 - y
+    distance = np.sqrt(cols[None, :] ** 2 + rows[:, None] ** 2)
+    core = np.clip(radius + 0.5 - distance, 0.0, 1.0)
+    halo = np.exp(-(distance / max(radius * 1.5, 1.0)) ** 2) * 0.5
+    glow = (core + halo)[..., None] * strength * np.asarray(colour, np.float32)
+    image[top:bottom, left:right] += glow
+
+
+def _composite(image: np.ndarray, left: int, top: int, premultiplied: np.ndarray,
+               alpha: np.ndarray) -> None:
+    """Alpha-blend a premultiplied patch at (left, top), clipped to the image."""
+    height, width = image.shape[:2]
+    size_v, size_u = alpha.shape
+    x1, y1 = max(0, left), max(0, top)
+    x2, y2 = min(width, left + size_u), min(height, top + size_v)
+    if x2 <= x1 or y2 <= y1:
+        return
+    patch_alpha = alpha[y1 - top:y2 - top, x1 - left:x2 - left, None]
+    patch = premultiplied[y1 - top:y2 - top, x1 - left:x2 - left]
+    region = image[y1:y2, x1:x2]
+    region[:] = region * (1.0 - patch_alpha) + patch

@@ -1,0 +1,461 @@
+"""``speed_sign_eval bag``: run a recorded drive through the pipeline, as fast as possible.
+
+Example::
+
+    speed_sign_eval bag drive_day --truth drive_day.csv --out drive_day_result --json
+
+- Reads ROS 2 bags (MCAP, sqlite3) and ROS 1 bags with rosbags; the image topic
+  (``sensor_msgs/Image`` or ``CompressedImage``) is found automatically when there is
+  only one, else named with ``--topic``.
+- Each frame goes through :class:`speed_sign_detector.pipeline.Pipeline` with its
+  header stamp (the record time when the stamp is zero), not at the recorded rate.
+- ``--out``: a ROS 2 MCAP bag with the node's outputs at the input stamps:
+  ``/candidates`` (PointCloud2, every frame), ``/speed_limit`` (UInt16, transient local,
+  on the first frame and whenever the active limit changes, like the node), and with
+  ``--debug-images`` ``/debug_image`` (bgr8).
+- ``--truth``: per-sign metrics against a truth file (:mod:`speed_sign_detector.truth`):
+
+  ``signs``
+      speed-limit signs (truth tracks with ``limit_kmh > 0``) seen in the processed part.
+  ``recognized``
+      signs whose value was recognized (a track of the pipeline newly recognized that
+      limit) while the sign was visible or within ``--grace`` seconds after it left.
+  ``recall``
+      recognized / signs.
+  ``wrong_limits``
+      recognitions that match no visible speed-limit sign of that value: any wrong
+      value published. Split into ``lookalike_limits`` (a look-alike sign was in view),
+      ``misread_limits`` (a limit sign of another value was in view) and
+      ``phantom_limits`` (no sign in view).
+  ``false_limits_per_hour``
+      wrong_limits per hour of drive time (stamps of the processed frames).
+  ``fps``, ``latency_ms_p50``, ``latency_ms_p95``
+      frames per second over the whole run (reading, decoding, pipeline, writing) and
+      per-frame processing time (image conversion + pipeline), milliseconds.
+
+A truncated or damaged bag ends the run with a non-zero exit status after the frames
+before the damage were processed, reported (the JSON line is still printed) and
+written to ``--out``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from speed_sign_detector.bag_io import BagReader, BagWriter, header_stamp_ns
+from speed_sign_detector.config import PipelineConfig, load_yaml
+from speed_sign_detector.errors import ImageConversionError, SpeedSignError
+from speed_sign_detector.truth import TruthTrack, group_tracks, read_truth
+
+#: Default grace after a sign left the image within which recognizing it still counts, s.
+DEFAULT_GRACE_S = 1.0
+OUTPUT_TOPICS = {'candidates': '/candidates', 'speed_limit': '/speed_limit',
+                 'debug_image': '/debug_image'}
+
+
+@dataclass(frozen=True)
+class LimitEvent:
+    """A limit newly recognized by the pipeline.
+
+    Attributes:
+        stamp_s: frame time, seconds.
+        limit_kmh: the recognized value.
+        x_px, y_px: where the recognizing track was (NaN when unknown).
+        track_id: the pipeline's track id (-1 when unknown).
+    """
+
+    stamp_s: float
+    limit_kmh: int
+    x_px: float = math.nan
+    y_px: float = math.nan
+    track_id: int = -1
+
+
+@dataclass
+class SignOutcome:
+    """What happened to one truth sign (a row of the per-sign table)."""
+
+    track_id: int
+    kind: str
+    limit_kmh: int
+    first_s: float
+    last_s: float
+    max_radius_px: float
+    recognized: bool = False
+    recognized_after_s: float | None = None
+    radius_at_recognition_px: float | None = None
+    wrong_values: list[int] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class DriveScore:
+    """Per-sign metrics of a drive (see the module docstring)."""
+
+    signs: int
+    recognized: int
+    recall: float | None
+    wrong_limits: int
+    lookalike_limits: int
+    misread_limits: int
+    phantom_limits: int
+    false_limits_per_hour: float
+    outcomes: tuple[SignOutcome, ...]
+
+
+def score_drive(tracks: Sequence[TruthTrack], events: Sequence[LimitEvent],
+                frame_stamps_s: Sequence[float], grace_s: float = DEFAULT_GRACE_S
+                ) -> DriveScore:
+    """Match the pipeline's limit recognitions to the truth signs.
+
+    Args:
+        tracks: truth tracks (:func:`speed_sign_detector.truth.group_tracks`).
+        events: limits the pipeline newly recognized, in time order.
+        frame_stamps_s: stamps of the processed frames, seconds (ascending); truth signs
+            that first appear after the last processed frame are not counted.
+        grace_s: a recognition up to this long after a sign's last visible frame counts.
+
+    Returns:
+        The metrics; ``recall`` is None when there is no speed-limit sign.
+    """
+    stamps = np.asarray(frame_stamps_s, dtype=np.float64)
+    period_s = float(np.median(np.diff(stamps))) if stamps.size > 1 else 0.0
+    tolerance_s = 0.5 * period_s + 1e-4
+    last_stamp = float(stamps[-1]) if stamps.size else -math.inf
+    first_stamp = float(stamps[0]) if stamps.size else 0.0
+    seen = [track for track in tracks if track.first_stamp_s <= last_stamp + tolerance_s]
+    outcomes = {track.track_id: SignOutcome(
+        track.track_id, track.kind, track.limit_kmh, track.first_stamp_s - first_stamp,
+        track.last_stamp_s - first_stamp, track.max_radius_px) for track in seen}
+    lookalike = misread = phantom = 0
+    for event in events:
+        in_view = [track for track in seen
+                   if track.first_stamp_s - tolerance_s <= event.stamp_s
+                   <= track.last_stamp_s + grace_s]
+        matches = [track for track in in_view if track.limit_kmh == event.limit_kmh]
+        if matches:
+            best = min(matches, key=lambda track: (_distance_px(track, event),
+                                                   outcomes[track.track_id].recognized,
+                                                   track.first_stamp_s))
+            outcome = outcomes[best.track_id]
+            if not outcome.recognized:
+                outcome.recognized = True
+                outcome.recognized_after_s = event.stamp_s - best.first_stamp_s
+                outcome.radius_at_recognition_px = _nearest_row(best, event.stamp_s).radius_px
+            continue
+        limit_tracks = [track for track in in_view if track.is_limit]
+        if limit_tracks:
+            misread += 1
+            nearest = min(limit_tracks, key=lambda track: _distance_px(track, event))
+            outcomes[nearest.track_id].wrong_values.append(event.limit_kmh)
+        elif in_view:
+            lookalike += 1
+            nearest = min(in_view, key=lambda track: _distance_px(track, event))
+            outcomes[nearest.track_id].wrong_values.append(event.limit_kmh)
+        else:
+            phantom += 1
+    limit_outcomes = [outcome for outcome in outcomes.values() if outcome.limit_kmh > 0]
+    recognized = sum(outcome.recognized for outcome in limit_outcomes)
+    wrong = lookalike + misread + phantom
+    duration_h = max((last_stamp - first_stamp + period_s) / 3600.0, 1e-9) \
+        if stamps.size else math.inf
+    return DriveScore(
+        signs=len(limit_outcomes), recognized=recognized,
+        recall=recognized / len(limit_outcomes) if limit_outcomes else None,
+        wrong_limits=wrong, lookalike_limits=lookalike, misread_limits=misread,
+        phantom_limits=phantom, false_limits_per_hour=wrong / duration_h,
+        outcomes=tuple(sorted(outcomes.values(), key=lambda outcome: outcome.first_s)))
+
+
+def _nearest_row(track: TruthTrack, stamp_s: float) -> Any:
+    return min(track.rows, key=lambda row: abs(row.stamp_s - stamp_s))
+
+
+def _distance_px(track: TruthTrack, event: LimitEvent) -> float:
+    """Distance from the event's position to the sign's box centre at that time."""
+    if math.isnan(event.x_px):
+        return 0.0
+    centre_x, centre_y = _nearest_row(track, event.stamp_s).centre_px
+    return math.hypot(centre_x - event.x_px, centre_y - event.y_px)
+
+
+def new_limit_events(result: Any, recognized_track_ids: set[int]) -> list[LimitEvent]:
+    """Limits newly recognized in one :class:`FrameResult` (updates ``recognized_track_ids``).
+
+    A track of the pipeline recognizes its label once; each newly recognized track with a
+    numeric label is an event at the track's position. A ``recognized_limit_kmh`` without
+    such a track (should not happen) is still an event, without position.
+    """
+    events = []
+    for track in result.tracks:
+        if track.recognized and track.track_id not in recognized_track_ids:
+            recognized_track_ids.add(track.track_id)
+            if track.label.isdigit():
+                events.append(LimitEvent(result.stamp_s, int(track.label), track.x_px,
+                                         track.y_px, track.track_id))
+    if result.recognized_limit_kmh and not any(
+            event.limit_kmh == result.recognized_limit_kmh for event in events):
+        events.append(LimitEvent(result.stamp_s, int(result.recognized_limit_kmh)))
+    return events
+
+
+class _Progress:
+    """A one-line progress bar on stderr, drawn only when stderr is a terminal."""
+
+    def __init__(self, total: int) -> None:
+        self.total = max(total, 0)
+        self.enabled = sys.stderr.isatty()
+        self._last_draw = 0.0
+
+    def update(self, done: int, fps: float) -> None:
+        now = time.monotonic()
+        if not self.enabled or (now - self._last_draw < 0.2 and done != self.total):
+            return
+        self._last_draw = now
+        if self.total:
+            filled = int(30 * min(done, self.total) / self.total)
+            bar = '#' * filled + '.' * (30 - filled)
+            text = f'\r[{bar}] {done}/{self.total} frames {fps:5.1f} fps'
+        else:
+            text = f'\r{done} frames {fps:5.1f} fps'
+        print(text, end='', file=sys.stderr, flush=True)
+
+    def finish(self) -> None:
+        if self.enabled:
+            print(file=sys.stderr)
+
+
+class _ResultWriter:
+    """The node's output topics into a ROS 2 MCAP bag."""
+
+    def __init__(self, path: Path, debug_images: bool) -> None:
+        from speed_sign_detector.ros import messages
+
+        self._messages = messages
+        self.writer = BagWriter(path, 'mcap')
+        self.debug_images = debug_images
+        self.writer.add_topic(OUTPUT_TOPICS['candidates'], 'sensor_msgs/msg/PointCloud2')
+        self.writer.add_topic(OUTPUT_TOPICS['speed_limit'], 'std_msgs/msg/UInt16', latched=True)
+        if debug_images:
+            self.writer.add_topic(OUTPUT_TOPICS['debug_image'], 'sensor_msgs/msg/Image')
+        self._published_limit: int | None = None
+
+    def write(self, stamp_ns: int, frame_id: str, gray: np.ndarray, result: Any) -> None:
+        writer, messages = self.writer, self._messages
+        header = writer.header(stamp_ns, frame_id)
+        writer.write(OUTPUT_TOPICS['candidates'], stamp_ns, messages.candidates_message(
+            result, header, pointcloud_class=writer.message_class('sensor_msgs/msg/PointCloud2'),
+            pointfield_class=writer.message_class('sensor_msgs/msg/PointField')))
+        if result.active_limit_kmh != self._published_limit:
+            writer.write(OUTPUT_TOPICS['speed_limit'], stamp_ns, messages.speed_limit_message(
+                result.active_limit_kmh, uint16_class=writer.message_class('std_msgs/msg/UInt16')))
+            self._published_limit = result.active_limit_kmh
+        if self.debug_images:
+            writer.write(OUTPUT_TOPICS['debug_image'], stamp_ns, messages.debug_image_message(
+                gray, result, header, image_class=writer.message_class('sensor_msgs/msg/Image')))
+
+    def close(self) -> None:
+        self.writer.close()
+
+
+def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | None = None,
+                 out_path: Path | None = None, debug_images: bool = False,
+                 config: PipelineConfig | None = None, grace_s: float = DEFAULT_GRACE_S,
+                 progress: bool = True) -> tuple[dict[str, Any], SpeedSignError | None]:
+    """Run a bag through the pipeline; returns (summary, error that cut the run short).
+
+    The summary is complete for the frames processed before an error; errors that stop
+    the run before any frame (missing bag, no image topic, bad truth file) are raised.
+
+    Raises:
+        SpeedSignError: (BagError, TruthFileError, ...) when nothing could be processed.
+    """
+    from speed_sign_detector.image_conversion import message_to_gray
+    from speed_sign_detector.pipeline import Pipeline
+
+    tracks = group_tracks(read_truth(truth_path)) if truth_path is not None else None
+    stopped_by: SpeedSignError | None = None
+    stamps_s: list[float] = []
+    latencies_ms: list[float] = []
+    events: list[LimitEvent] = []
+    recognized_ids: set[int] = set()
+    limit_changes: list[tuple[float, int]] = []
+    with BagReader(bag_path) as bag:
+        image_topic = bag.image_topic(topic)
+        writer = _ResultWriter(out_path, debug_images) if out_path is not None else None
+        bar = _Progress(image_topic.count if progress else 0)
+        bar.enabled = bar.enabled and progress
+        started = time.perf_counter()
+        pipeline = Pipeline(config or PipelineConfig())
+        try:
+            backend, renderer = pipeline.backend_name, pipeline.renderer
+            active_limit = 0
+            loop_started = time.perf_counter()
+            try:
+                for item in bag.messages(image_topic.name):
+                    stamp_ns = header_stamp_ns(item.message, item.log_time_ns)
+                    begin = time.perf_counter()
+                    try:
+                        gray = message_to_gray(item.message)
+                        result = pipeline.process(gray, stamp_ns * 1e-9)
+                    except ValueError as err:
+                        if isinstance(err, SpeedSignError):
+                            raise
+                        raise ImageConversionError(
+                            f'frame {len(stamps_s)} of {image_topic.name} cannot be '
+                            f'processed: {err}') from err
+                    latencies_ms.append((time.perf_counter() - begin) * 1e3)
+                    stamps_s.append(stamp_ns * 1e-9)
+                    events.extend(new_limit_events(result, recognized_ids))
+                    if result.active_limit_kmh != active_limit:
+                        active_limit = result.active_limit_kmh
+                        limit_changes.append((stamp_ns * 1e-9, active_limit))
+                    if writer is not None:
+                        frame_id = str(getattr(getattr(item.message, 'header', None),
+                                               'frame_id', ''))
+                        writer.write(stamp_ns, frame_id, gray, result)
+                    bar.update(len(stamps_s), len(stamps_s) / max(
+                        time.perf_counter() - loop_started, 1e-9))
+            except SpeedSignError as err:
+                stopped_by = err
+            finally:
+                bar.finish()
+                if writer is not None:
+                    writer.close()
+        finally:
+            pipeline.close()
+        elapsed_s = time.perf_counter() - started
+        loop_s = time.perf_counter() - loop_started
+        salvage_reason = bag.salvage_reason
+    frames = len(stamps_s)
+    summary: dict[str, Any] = {
+        'bag': str(bag_path), 'topic': image_topic.name, 'msgtype': image_topic.msgtype,
+        'frames': frames,
+        'duration_s': (stamps_s[-1] - stamps_s[0]) if frames > 1 else 0.0,
+        'backend': backend, 'renderer': renderer,
+        'fps': frames / loop_s if loop_s > 0 else 0.0,
+        'latency_ms_p50': float(np.percentile(latencies_ms, 50)) if latencies_ms else None,
+        'latency_ms_p95': float(np.percentile(latencies_ms, 95)) if latencies_ms else None,
+        'elapsed_s': elapsed_s,
+        'limit_events': [{'stamp_s': e.stamp_s, 'limit_kmh': e.limit_kmh,
+                          'x_px': None if math.isnan(e.x_px) else round(e.x_px, 1),
+                          'y_px': None if math.isnan(e.y_px) else round(e.y_px, 1)}
+                         for e in events],
+        'final_limit_kmh': limit_changes[-1][1] if limit_changes else 0,
+        'out_bag': str(out_path) if out_path is not None else None,
+        'truncated': stopped_by is not None or salvage_reason is not None,
+        'error': str(stopped_by) if stopped_by is not None else None,
+    }
+    if tracks is not None:
+        score = score_drive(tracks, events, stamps_s, grace_s)
+        summary.update({
+            'truth': str(truth_path), 'grace_s': grace_s,
+            'signs': score.signs, 'recognized': score.recognized, 'recall': score.recall,
+            'wrong_limits': score.wrong_limits, 'lookalike_limits': score.lookalike_limits,
+            'misread_limits': score.misread_limits, 'phantom_limits': score.phantom_limits,
+            'false_limits_per_hour': score.false_limits_per_hour,
+            'per_sign': [asdict(outcome) for outcome in score.outcomes],
+        })
+    return summary, stopped_by
+
+
+def format_report(summary: dict[str, Any]) -> str:
+    """Human-readable per-sign table and summary."""
+    lines = []
+    if 'per_sign' in summary:
+        lines.append(f'{"sign":>5} {"kind":<22} {"limit":>5} {"from s":>7} {"to s":>7} '
+                     f'{"max r":>6} {"result":<10} {"after s":>7} {"r px":>5}  wrong')
+        for row in summary['per_sign']:
+            if row['limit_kmh'] > 0:
+                result = 'recognized' if row['recognized'] else 'MISSED'
+            else:
+                result = 'look-alike'
+            after = (f'{row["recognized_after_s"]:7.2f}'
+                     if row['recognized_after_s'] is not None else f'{"-":>7}')
+            radius = (f'{row["radius_at_recognition_px"]:5.1f}'
+                      if row['radius_at_recognition_px'] is not None else f'{"-":>5}')
+            wrong = ','.join(str(value) for value in row['wrong_values']) or '-'
+            lines.append(f'{row["track_id"]:>5} {row["kind"]:<22} {row["limit_kmh"]:>5} '
+                         f'{row["first_s"]:7.2f} {row["last_s"]:7.2f} '
+                         f'{row["max_radius_px"]:6.1f} {result:<10} {after} {radius}  {wrong}')
+        lines.append('')
+        recall = summary['recall']
+        lines.append(f'signs {summary["signs"]}, recognized {summary["recognized"]}, recall '
+                     f'{recall:.3f}' if recall is not None else
+                     f'signs 0 (no speed-limit sign in the truth)')
+        lines.append(f'wrong limits {summary["wrong_limits"]} (look-alike '
+                     f'{summary["lookalike_limits"]}, misread {summary["misread_limits"]}, '
+                     f'phantom {summary["phantom_limits"]}), '
+                     f'{summary["false_limits_per_hour"]:.1f} per hour')
+    p50, p95 = summary['latency_ms_p50'], summary['latency_ms_p95']
+    lines.append(f'{summary["frames"]} frames of {summary["topic"]} ({summary["msgtype"]}), '
+                 f'{summary["duration_s"]:.1f} s of drive; {summary["fps"]:.1f} fps, latency '
+                 + (f'p50 {p50:.1f} ms, p95 {p95:.1f} ms' if p50 is not None else 'n/a')
+                 + f'; backend {summary["backend"]} ({summary["renderer"]})')
+    limits = ', '.join(f'{event["limit_kmh"]} at {event["stamp_s"]:.2f}'
+                       for event in summary['limit_events']) or 'none'
+    lines.append(f'limits recognized: {limits}')
+    if summary['out_bag']:
+        lines.append(f'results written to {summary["out_bag"]}')
+    if summary['error']:
+        lines.append(f'STOPPED EARLY: {summary["error"]}')
+    return '\n'.join(lines)
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``bag`` subcommand to ``speed_sign_eval``."""
+    parser = subparsers.add_parser(
+        'bag', help='run a recorded drive (ROS 2 MCAP/sqlite3 or ROS 1 bag) through the '
+        'pipeline', description=__doc__.split('\n\n')[0] if __doc__ else None)
+    parser.add_argument('bag', type=Path, help='ROS 2 bag directory, .mcap/.db3 file, or '
+                        'ROS 1 .bag file')
+    parser.add_argument('--topic', help='image topic (needed when the bag has several)')
+    parser.add_argument('--truth', type=Path, help='truth CSV for per-sign metrics')
+    parser.add_argument('--out', type=Path, help='write the outputs into this new ROS 2 '
+                        'MCAP bag')
+    parser.add_argument('--debug-images', action='store_true',
+                        help='with --out, also write /debug_image')
+    parser.add_argument('--config', type=Path, help='parameter YAML file of the node')
+    parser.add_argument('--backend', choices=('auto', 'gl', 'numpy'),
+                        help='voting backend (overrides --config)')
+    parser.add_argument('--grace', type=float, default=DEFAULT_GRACE_S,
+                        help=f'seconds after a sign leaves the image within which '
+                        f'recognizing it still counts (default {DEFAULT_GRACE_S:g})')
+    parser.add_argument('--json', action='store_true',
+                        help='print the summary as one JSON object (last stdout line)')
+    parser.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Execute ``speed_sign_eval bag``; returns the exit status."""
+    config = load_yaml(args.config) if args.config is not None else PipelineConfig()
+    if args.backend is not None:
+        config = PipelineConfig(**{**{name: getattr(config, name) for name in
+                                      ('classify', 'detector', 'classifier', 'tracker')},
+                                   'backend': args.backend})
+    if args.debug_images and args.out is None:
+        print('speed_sign_eval bag: --debug-images has no effect without --out',
+              file=sys.stderr)
+    summary, stopped_by = evaluate_bag(args.bag, args.topic, args.truth, args.out,
+                                       args.debug_images, config, args.grace)
+    if args.json:
+        print(json.dumps(summary, default=_json_default))
+    else:
+        print(format_report(summary))
+    if stopped_by is not None:
+        raise stopped_by
+    return 0
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, (np.floating, np.integer)):
+        return value.item()
+    raise TypeError(f'{type(value).__name__} is not JSON serializable')

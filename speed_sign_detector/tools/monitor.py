@@ -1,0 +1,286 @@
+"""``speed_sign_monitor``: watch a running detector node.
+
+Example::
+
+    speed_sign_monitor                  # live status line, Ctrl-C to stop
+    speed_sign_monitor --once --json    # one snapshot as JSON, for scripts
+
+Subscribes to ``speed_limit`` (std_msgs/UInt16, reliable + transient local, so the
+current value arrives at once), ``candidates`` (sensor_msgs/PointCloud2) and
+``/diagnostics`` (the node's status: the one whose values hold ``frames_processed``,
+or the one named by ``--status``). The status line shows the active limit, candidates
+per frame, the node's processing rate and latency, and dropped frames.
+
+``--once`` waits until all three topics were heard (or ``--timeout`` passes), prints
+one snapshot and exits. Exit status 1 with a message when nothing at all was published
+within ``--timeout`` seconds (is the node running, in the same ROS_DOMAIN_ID?).
+ROS arguments (``--ros-args -r speed_limit:=/car/speed_limit``) are accepted.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections import deque
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+from speed_sign_detector.ros.messages import pointcloud_to_array
+
+#: Diagnostics values copied into the snapshot (key in the node's status -> snapshot field).
+DIAGNOSTIC_FIELDS: dict[str, str] = {
+    'processing_fps': 'fps',
+    'latency_p50_ms': 'latency_p50_ms',
+    'latency_p95_ms': 'latency_p95_ms',
+    'processing_latency_p50_ms': 'processing_latency_p50_ms',
+    'processing_latency_p95_ms': 'processing_latency_p95_ms',
+    'frames_received': 'frames_received',
+    'frames_processed': 'frames_processed',
+    'frames_dropped': 'frames_dropped',
+    'frames_rejected_bad_input': 'frames_rejected',
+    'backend': 'backend',
+}
+
+
+@dataclass
+class MonitorSnapshot:
+    """What the monitor knows now (None = not heard yet).
+
+    Attributes:
+        active_limit_kmh: last value on ``speed_limit`` (0 = none known).
+        candidates_per_frame: points in the last ``candidates`` message.
+        candidates_per_frame_mean: mean over the last 30 ``candidates`` messages.
+        candidate_limits_kmh: limits the classifier gave the last frame's candidates.
+        candidates_hz: rate of ``candidates`` messages over the last 30, Hz.
+        fps, latency_p50_ms, latency_p95_ms, processing_latency_p50_ms,
+        processing_latency_p95_ms, frames_received, frames_processed, frames_dropped,
+        frames_rejected, backend: from the node's ``/diagnostics`` status.
+        status_level, status_message, status_name: that status' level, message, name.
+        messages: messages heard per topic.
+        age_s: seconds since the last message of any topic.
+    """
+
+    active_limit_kmh: int | None = None
+    candidates_per_frame: int | None = None
+    candidates_per_frame_mean: float | None = None
+    candidate_limits_kmh: list[int] | None = None
+    candidates_hz: float | None = None
+    fps: float | None = None
+    latency_p50_ms: float | None = None
+    latency_p95_ms: float | None = None
+    processing_latency_p50_ms: float | None = None
+    processing_latency_p95_ms: float | None = None
+    frames_received: int | None = None
+    frames_processed: int | None = None
+    frames_dropped: int | None = None
+    frames_rejected: int | None = None
+    backend: str | None = None
+    status_level: str | None = None
+    status_message: str | None = None
+    status_name: str | None = None
+    messages: dict[str, int] = field(default_factory=lambda: {
+        'speed_limit': 0, 'candidates': 0, 'diagnostics': 0})
+    age_s: float | None = None
+
+    def status_line(self) -> str:
+        """One line for a terminal."""
+        def show(value: Any, fmt: str = '{}') -> str:
+            return '-' if value is None else fmt.format(value)
+
+        limit = ('none' if self.active_limit_kmh == 0 else
+                 show(self.active_limit_kmh, '{} km/h'))
+        return (f'limit {limit} | candidates {show(self.candidates_per_frame)}'
+                f' (mean {show(self.candidates_per_frame_mean, "{:.1f}")}) | '
+                f'fps {show(self.fps, "{:.1f}")} | latency p50 '
+                f'{show(self.latency_p50_ms, "{:.0f}")} p95 '
+                f'{show(self.latency_p95_ms, "{:.0f}")} ms | processed '
+                f'{show(self.frames_processed)} dropped {show(self.frames_dropped)} | '
+                f'{show(self.backend)} {show(self.status_level)}')
+
+
+class _Monitor:
+    """Subscriptions and the snapshot they fill."""
+
+    def __init__(self, node: Any, status_name: str | None) -> None:
+        from diagnostic_msgs.msg import DiagnosticArray
+        from rclpy.qos import (
+            DurabilityPolicy,
+            QoSProfile,
+            ReliabilityPolicy,
+            qos_profile_sensor_data,
+        )
+        from sensor_msgs.msg import PointCloud2
+        from std_msgs.msg import UInt16
+
+        self.snapshot = MonitorSnapshot()
+        self._status_name = status_name
+        self._cloud_times: deque[float] = deque(maxlen=30)
+        self._cloud_sizes: deque[int] = deque(maxlen=30)
+        self._last_message: float | None = None
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.subscriptions = [
+            node.create_subscription(UInt16, 'speed_limit', self._on_limit, latched),
+            node.create_subscription(PointCloud2, 'candidates', self._on_candidates,
+                                     qos_profile_sensor_data),
+            node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics,
+                                     10),
+        ]
+
+    def heard_any(self) -> bool:
+        return any(self.snapshot.messages.values())
+
+    def heard_all(self) -> bool:
+        return all(self.snapshot.messages.values())
+
+    def refresh_age(self) -> None:
+        if self._last_message is not None:
+            self.snapshot.age_s = round(time.monotonic() - self._last_message, 3)
+
+    def _heard(self, topic: str) -> None:
+        self.snapshot.messages[topic] += 1
+        self._last_message = time.monotonic()
+
+    def _on_limit(self, msg: Any) -> None:
+        self.snapshot.active_limit_kmh = int(msg.data)
+        self._heard('speed_limit')
+
+    def _on_candidates(self, msg: Any) -> None:
+        points = pointcloud_to_array(msg)
+        snapshot = self.snapshot
+        snapshot.candidates_per_frame = int(points.size)
+        if points.dtype.names and 'limit_kmh' in points.dtype.names:
+            snapshot.candidate_limits_kmh = [int(v) for v in points['limit_kmh'] if v > 0]
+        self._cloud_times.append(time.monotonic())
+        self._cloud_sizes.append(int(points.size))
+        snapshot.candidates_per_frame_mean = round(
+            sum(self._cloud_sizes) / len(self._cloud_sizes), 2)
+        if len(self._cloud_times) > 1:
+            span = self._cloud_times[-1] - self._cloud_times[0]
+            snapshot.candidates_hz = round((len(self._cloud_times) - 1) / span, 2) \
+                if span > 0 else None
+        self._heard('candidates')
+
+    def _on_diagnostics(self, msg: Any) -> None:
+        for status in msg.status:
+            values = {item.key: item.value for item in status.values}
+            if self._status_name is not None:
+                if status.name != self._status_name:
+                    continue
+            elif 'frames_processed' not in values:
+                continue
+            snapshot = self.snapshot
+            for key, name in DIAGNOSTIC_FIELDS.items():
+                if key in values:
+                    setattr(snapshot, name, _parse(values[key]))
+            level = status.level
+            level_value = level[0] if isinstance(level, (bytes, bytearray)) else int(level)
+            snapshot.status_level = {0: 'OK', 1: 'WARN', 2: 'ERROR', 3: 'STALE'}.get(
+                level_value, str(level_value))
+            snapshot.status_message = str(status.message)
+            snapshot.status_name = str(status.name)
+            self._heard('diagnostics')
+            return
+
+
+def _parse(text: str) -> Any:
+    """Diagnostic values are strings: ints and floats are returned as numbers."""
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            continue
+    return text
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Command-line arguments of ``speed_sign_monitor``."""
+    parser = argparse.ArgumentParser(
+        prog='speed_sign_monitor',
+        description='Show the state of a running speed_sign_detector node.')
+    parser.add_argument('--once', action='store_true',
+                        help='print one snapshot (after hearing every topic, or at the '
+                        'timeout) and exit')
+    parser.add_argument('--json', action='store_true', help='print snapshots as JSON')
+    parser.add_argument('--timeout', type=float, default=10.0,
+                        help='give up when nothing is published for this many seconds '
+                        '(default 10)')
+    parser.add_argument('--status', help='name of the /diagnostics status to show (default: '
+                        'the one with frames_processed)')
+    parser.add_argument('--interval', type=float, default=0.5,
+                        help='seconds between status lines (default 0.5)')
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run ``speed_sign_monitor``; returns the exit status."""
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+    from rclpy.utilities import remove_ros_args
+
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args = build_parser().parse_args(remove_ros_args(['speed_sign_monitor', *argv])[1:])
+    rclpy.init(args=['speed_sign_monitor', *argv])
+    node = rclpy.create_node('speed_sign_monitor')
+    try:
+        monitor = _Monitor(node, args.status)
+        return _run(node, monitor, args)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        return 130
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+def _run(node: Any, monitor: _Monitor, args: argparse.Namespace) -> int:
+    import rclpy
+
+    started = time.monotonic()
+    terminal = sys.stdout.isatty() and not args.json
+    next_print = started + args.interval
+    while True:
+        rclpy.spin_once(node, timeout_sec=0.05)
+        now = time.monotonic()
+        monitor.refresh_age()
+        silent_s = (monitor.snapshot.age_s if monitor.heard_any() else now - started)
+        if args.once:
+            if monitor.heard_all() or (now - started >= args.timeout):
+                break
+            continue
+        if silent_s is not None and silent_s >= args.timeout:
+            if terminal:
+                print()
+            break
+        if now >= next_print:
+            next_print = now + args.interval
+            if args.json:
+                print(json.dumps(asdict(monitor.snapshot)), flush=True)
+            elif terminal:
+                print(f'\r{monitor.snapshot.status_line():<120}', end='', flush=True)
+            else:
+                print(monitor.snapshot.status_line(), flush=True)
+    if not monitor.heard_any():
+        print(f'speed_sign_monitor: error: nothing published on speed_limit, candidates or '
+              f'/diagnostics within {args.timeout:g} s; is speed_sign_detector running with '
+              f'the same ROS_DOMAIN_ID (here {_domain_id()}) and namespace?', file=sys.stderr)
+        return 1
+    if args.once:
+        if args.json:
+            print(json.dumps(asdict(monitor.snapshot)))
+        else:
+            print(monitor.snapshot.status_line())
+        return 0
+    print(f'speed_sign_monitor: error: nothing published for {args.timeout:g} s; the node '
+          f'stopped or its topics were remapped', file=sys.stderr)
+    return 1
+
+
+def _domain_id() -> str:
+    import os
+
+    return os.environ.get('ROS_DOMAIN_ID', '0')
+
+
+if __name__ == '__main__':
+    sys.exit(main())

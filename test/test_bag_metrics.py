@@ -1,0 +1,79 @@
+"""Per-sign scoring of a drive: matching recognized limits to truth signs."""
+from __future__ import annotations
+
+import pytest
+
+from speed_sign_detector.tools.eval_bag import LimitEvent, score_drive
+from speed_sign_detector.truth import TruthRow, group_tracks
+
+FPS = 10.0
+STAMPS = [100.0 + index / FPS for index in range(100)]   # 10 s of drive
+
+
+def sign_rows(track_id: int, kind: str, limit: int, first: int, last: int,
+              x_px: float = 400.0) -> list[TruthRow]:
+    return [TruthRow(STAMPS[index], index, track_id, kind, limit, x_px - 10, 190.0,
+                     x_px + 10, 210.0) for index in range(first, last + 1)]
+
+
+TRACKS = group_tracks(sign_rows(1, '50', 50, 0, 20) + sign_rows(2, 'no_overtaking', 0, 30, 45)
+                      + sign_rows(3, '80', 80, 50, 70) + sign_rows(4, '30', 30, 80, 95))
+
+
+def test_all_recognized_in_time_gives_full_recall() -> None:
+    events = [LimitEvent(STAMPS[10], 50, 400.0, 200.0), LimitEvent(STAMPS[65], 80),
+              LimitEvent(STAMPS[90], 30)]
+    score = score_drive(TRACKS, events, STAMPS)
+    assert (score.signs, score.recognized, score.recall) == (3, 3, 1.0)
+    assert score.wrong_limits == 0 and score.false_limits_per_hour == 0.0
+    first = score.outcomes[0]
+    assert first.recognized and first.recognized_after_s == pytest.approx(1.0)
+    assert first.radius_at_recognition_px == pytest.approx(10.0)
+    assert [outcome.track_id for outcome in score.outcomes] == [1, 2, 3, 4]
+
+
+def test_grace_after_the_sign_left_and_late_recognition() -> None:
+    # Sign 1 leaves at frame 20 (102.0 s): 0.8 s later counts, 1.5 s later does not.
+    within = score_drive(TRACKS, [LimitEvent(STAMPS[28], 50)], STAMPS, grace_s=1.0)
+    assert within.recognized == 1 and within.wrong_limits == 0
+    late = score_drive(TRACKS, [LimitEvent(STAMPS[35], 50)], STAMPS, grace_s=1.0)
+    assert late.recognized == 0
+    # At 103.5 s the look-alike (track 2) is in view: a 50 there is a look-alike limit.
+    assert (late.wrong_limits, late.lookalike_limits) == (1, 1)
+    assert late.outcomes[1].wrong_values == [50]
+
+
+def test_wrong_values_are_split_by_what_was_in_view() -> None:
+    events = [LimitEvent(STAMPS[5], 60),     # sign 50 in view: misread
+              LimitEvent(STAMPS[40], 70),    # only the look-alike in view
+              LimitEvent(STAMPS[76], 120)]   # nothing in view (sign 80 left at 70 + 0.6 s)
+    score = score_drive(TRACKS, events, STAMPS, grace_s=0.5)
+    assert (score.misread_limits, score.lookalike_limits, score.phantom_limits) == (1, 1, 1)
+    assert score.wrong_limits == 3 and score.recognized == 0 and score.recall == 0.0
+    assert score.false_limits_per_hour == pytest.approx(3 / (10.0 / 3600.0))
+    assert score.outcomes[0].wrong_values == [60]
+
+
+def test_a_second_event_for_a_recognized_sign_is_not_wrong() -> None:
+    score = score_drive(TRACKS, [LimitEvent(STAMPS[5], 50), LimitEvent(STAMPS[15], 50)],
+                        STAMPS)
+    assert score.recognized == 1 and score.wrong_limits == 0
+
+
+def test_signs_after_the_last_processed_frame_are_not_counted() -> None:
+    score = score_drive(TRACKS, [LimitEvent(STAMPS[10], 50)], STAMPS[:40])
+    assert score.signs == 1 and score.recall == 1.0
+    assert [outcome.track_id for outcome in score.outcomes] == [1, 2]
+
+
+def test_position_decides_between_two_signs_of_the_same_value() -> None:
+    rows = sign_rows(1, '50', 50, 0, 20, x_px=100.0) + sign_rows(2, '50', 50, 0, 20, x_px=500.0)
+    score = score_drive(group_tracks(rows), [LimitEvent(STAMPS[10], 50, 498.0, 200.0)], STAMPS)
+    recognized = {outcome.track_id: outcome.recognized for outcome in score.outcomes}
+    assert recognized == {1: False, 2: True}
+    assert score.recall == 0.5
+
+
+def test_drive_without_limit_signs_has_no_recall() -> None:
+    score = score_drive(group_tracks(sign_rows(1, 'no_entry', 0, 0, 10)), [], STAMPS)
+    assert score.signs == 0 and score.recall is None and score.wrong_limits == 0
