@@ -17,7 +17,12 @@ $(INSTALLED): setup.py package.xml pyproject.toml
 
 ## demo: synthetic drive -> evaluation table + annotated contact sheet in out/demo/
 demo: $(INSTALLED)
-	$(BIN)/python -m speed_sign_detector.tools.demo --out $(OUT)/demo
+	rm -rf $(OUT)/demo && mkdir -p $(OUT)/demo
+	$(BIN)/speed_sign_synth $(OUT)/demo/drive --truth $(OUT)/demo/truth.csv --seed 7 \
+		--duration 24 --lighting mixed
+	$(BIN)/speed_sign_eval bag $(OUT)/demo/drive --truth $(OUT)/demo/truth.csv \
+		--out $(OUT)/demo/results --contact-sheet $(OUT)/demo/contact_sheet.png
+	@echo "results bag: $(OUT)/demo/results   picture: $(OUT)/demo/contact_sheet.png"
 
 ## live-demo: node + bag replay + monitor over DDS, all in one command
 live-demo: $(INSTALLED)

@@ -369,6 +369,9 @@ def _scan_file(path: Path, reason: str) -> _Salvage:
     elif data.startswith(_ROS1_MAGIC):
         salvage = _Salvage(reason, False, get_typestore(Stores.ROS1_NOETIC))
         _scan_ros1(data, salvage)
+    elif path.suffix == '.db3':
+        raise BagError(f'cannot open bag {path}: {reason} (a damaged or truncated sqlite3 '
+                       f'bag cannot be recovered; MCAP and ROS 1 recordings can)')
     else:
         raise BagError(f'cannot open bag {path}: {reason}')
     if not salvage.connections:

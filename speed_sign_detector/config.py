@@ -61,14 +61,16 @@ def validate(config: Any) -> None:
 class DetectorConfig:
     """Radial-symmetry detector (IVS 2011, sections III-A, III-B, III-D)."""
 
-    min_radius_px: float = setting(5.0, 'Smallest sign radius searched, in pixels.',
+    min_radius_px: float = setting(3.5, 'Smallest radius voted for, in pixels (the inner '
+                                   'edge of the red ring of an 11 px wide sign).',
                                    low=2.0, high=200.0)
     max_radius_px: float = setting(40.0, 'Largest sign radius searched, in pixels.',
                                    low=3.0, high=400.0)
     radius_bands: int = setting(4, 'Number of radius bands voted separately to recover '
                                 'the size (section III-D).', low=1, high=8)
-    gradient_threshold: float = setting(40.0, 'Minimum 3x3 Sobel gradient magnitude of '
-                                        'an edge pixel, in gray levels per pixel x 8.',
+    gradient_threshold: float = setting(60.0, 'Minimum 3x3 Sobel gradient magnitude of '
+                                        'an edge pixel, on the contrast scale (0..255) '
+                                        'per pixel x 8.',
                                         low=0.0, high=2000.0)
     max_candidates: int = setting(7, 'Most candidates reported per frame.', low=1, high=64)
     block_size_px: int = setting(8, 'Block size of the max reduction, in pixels.',
@@ -76,25 +78,45 @@ class DetectorConfig:
     polarity: str = setting('bright_inside', 'Which side of an edge votes: '
                             'bright_inside (white disc in a dark ring), dark_inside, '
                             'or both.', choices=('bright_inside', 'dark_inside', 'both'))
+    vote_profile: str = setting('tent', 'Weight of a vote across its spread: tent (1 on '
+                                'the gradient line, falling linearly to 0 at +/- r tan(pi/8): '
+                                'a sharp peak at the centre) or flat (the paper\'s uniform '
+                                'spread: a plateau).', choices=('tent', 'flat'))
+    dark_side_min_radius_px: float = setting(0.0, 'With bright_inside polarity, radius '
+                                             'bands from this radius up vote toward both '
+                                             'sides (the ring\'s outer edge against a '
+                                             'brighter sky); 0 = never.', low=0.0,
+                                             high=400.0)
     min_score: float = setting(0.0, 'Candidates scoring below this are not reported.',
                                low=0.0, high=1e9)
+    contrast: str = setting('log', 'Gray scale the gradients are taken on: linear gray '
+                            'levels, or log (gradients measure contrast ratios, so a sign in '
+                            'shade has the edges it has in sunlight).',
+                            choices=('linear', 'log'))
+    log_offset_gray: float = setting(16.0, 'Offset c of the log scale '
+                                     '255 ln((I + c) / c) / ln((255 + c) / c): limits how '
+                                     'much sensor noise in deep shadow is amplified.',
+                                     low=1.0, high=255.0)
     thin_edges: bool = setting(True, 'Keep only edge pixels that are local maxima of the '
                                'gradient magnitude along the gradient (non-maximum '
                                'suppression): thinner edges, fewer votes.')
+    edge_support: int = setting(0, 'An edge pixel votes only when at least this many of '
+                                'its 8 neighbours are edge pixels with a gradient direction '
+                                'within 30 degrees (contours, not isolated texture).',
+                                low=0, high=8)
     level_min_radius_px: float = setting(4.0, 'A radius band votes on the coarsest pyramid '
                                          'level (2x2 box averages) on which its smallest '
                                          'radius still spans this many level pixels.',
                                          low=1.0, high=100.0)
     max_pyramid_level: int = setting(3, 'Coarsest pyramid level used for voting (0 = vote '
                                      'at full resolution only).', low=0, high=6)
-    accumulator_shrink: int = setting(1, 'Vote images are 2^this times smaller than the '
-                                      'pyramid level whose edges vote into them (fewer '
-                                      'fragments; centres are refined to sub-pixel).',
-                                      low=0, high=2)
-    direction_balance: float = setting(1.0, 'How much a centre voted from one side only '
-                                       'is discounted: score = (sum of votes - this x '
-                                       'resultant of the vote directions) / 2 pi '
-                                       '(0 = plain vote sum).', low=0.0, high=2.0)
+    vote_pixels_per_radius: float = setting(3.0, 'A band votes into an image (a pyramid '
+                                            'level at least as coarse as its edges) whose '
+                                            'pixel is at most its smallest radius / this: '
+                                            'coarser vote images for large radii, fewer '
+                                            'fragments; centres are refined to sub-pixel. '
+                                            '0 = vote at the edge level.',
+                                            low=0.0, high=100.0)
     suppression_factor: float = setting(1.0, 'Non-maximum suppression: a candidate closer '
                                         'than this many radii (the larger of the two) to a '
                                         'better one is the same sign and dropped.',
@@ -111,16 +133,25 @@ class DetectorConfig:
 class ClassifierConfig:
     """FFT template classifier (DAGM 2010)."""
 
-    psr_threshold: float = setting(6.0, 'Peak-to-sidelobe ratio below which the answer is '
+    psr_threshold: float = setting(8.0, 'Peak-to-sidelobe ratio below which the answer is '
                                    '"no sign".', low=0.0, high=1000.0)
-    min_margin: float = setting(0.5, 'PSR lead over the best other label below which a '
+    min_margin: float = setting(0.25, 'PSR lead over the best other label below which a '
                                 'speed-limit answer is withheld ("no sign").',
                                 low=0.0, high=1000.0)
-    kth_law: float = setting(0.1, 'Exponent k of the kth-law nonlinearity applied to '
+    kth_law: float = setting(0.5, 'Exponent k of the kth-law nonlinearity applied to '
                              'spectrum magnitudes (1 = linear).', low=0.0, high=1.0)
-    noise_tradeoff: float = setting(0.0, 'Optimal trade-off between MACE (0) and noise '
+    noise_tradeoff: float = setting(0.9, 'Optimal trade-off between MACE (0) and noise '
                                     'tolerance (1) in filter synthesis.', low=0.0, high=1.0)
-    min_radius_px: float = setting(8.0, 'Smallest sign radius of the filter banks, pixels.',
+    class_field_radius: float = setting(0.6, 'Classification looks only inside this '
+                                        'fraction of the sign radius (the digits).',
+                                        low=0.1, high=1.5)
+    min_sign_radius_px: float = setting(5.0, 'Candidates with a smaller radius are answered '
+                                        '"no sign", pixels.', low=1.0, high=200.0)
+    magnify_margin: float = setting(1.1, 'Signs smaller than the smallest filters are '
+                                    'magnified to this factor times its radius.',
+                                    low=1.0, high=2.0)
+    min_radius_px: float = setting(16.0, 'Smallest sign radius of the filter banks, pixels '
+                                   '(smaller signs are magnified to it).',
                                    low=3.0, high=200.0)
     max_radius_px: float = setting(48.0, 'Largest sign radius of the filter banks, pixels.',
                                    low=4.0, high=400.0)
@@ -134,14 +165,31 @@ class ClassifierConfig:
     position_search: float = setting(0.35, 'Peak search half-width around the candidate '
                                      'centre, as a fraction of its radius.', low=0.0,
                                      high=2.0)
+    class_position_search: float = setting(0.1, 'Classification peak search half-width '
+                                           'around the detected centre, fraction of the '
+                                           'radius.', low=0.0, high=1.0)
+    sidelobe_window: float = setting(0.65, 'PSR sidelobe window half-size, fraction of the '
+                                     'radius.', low=0.1, high=3.0)
+    sidelobe_exclude: float = setting(0.14, 'PSR excluded centre half-size, fraction of the '
+                                      'radius.', low=0.0, high=1.0)
+    class_score_top: int = setting(3, 'A class scores the mean PSR of its this many best '
+                                   'filters (sizes x in-plane rotations).', low=1, high=15)
+    class_neighbour_classes: int = setting(4, 'At the neighbouring sizes only the filters '
+                                           'of this many leading classes are correlated.',
+                                           low=1, high=30)
     class_size_neighbours: int = setting(1, 'Classification filters of this many sizes on '
                                          'each side of the detected size are also tried.',
                                          low=0, high=4)
-    clahe_clip_limit: float = setting(2.0, 'CLAHE contrast clip limit applied to the ROI '
-                                      '(0 = no CLAHE).', low=0.0, high=40.0)
+    clahe_clip_limit: float = setting(0.0, 'CLAHE contrast clip limit applied to the ROI '
+                                      'before detection (0 = no CLAHE).', low=0.0,
+                                      high=40.0)
     clahe_tiles: int = setting(2, 'CLAHE tile grid (tiles per side) on the ROI.', low=1,
                                high=16)
-    cache_dir: str = setting('', 'Folder to cache built filter banks in ("" = no cache).')
+    clahe_for_classification: bool = setting(False, 'Classify on the CLAHE-enhanced ROI '
+                                             '(else CLAHE serves detection only).')
+    cache_dir: str = setting('~/.cache/speed_sign_detector', 'Folder to cache the built '
+                             'filter banks in, keyed by every parameter that shapes them '
+                             '("" = build at every start, ~15-25 s).')
 
     def __post_init__(self) -> None:
         validate(self)

@@ -25,7 +25,8 @@ World and camera (metres, right-handed, y down):
   (circles that never move).
 - Lighting: ``day``, ``dusk`` (darker, warm), ``night`` (dark, low contrast, headlight
   pool on the road, retro-reflecting signs, lit lamps) or ``mixed`` (day to night
-  over the drive). Motion blur (forward motion and camera shake) and sensor noise.
+  over the drive). Motion blur (forward motion and camera shake; exposure about 4 ms
+  by day, 13 ms at dusk, 30 ms at night at 30 fps) and sensor noise.
 
 Everything is a function of the seed and the frame index: the same
 :class:`DriveConfig` renders the same frames in any order.
@@ -291,7 +292,8 @@ class SyntheticDrive:
         pose = self._pose(time_s)
         darkness = self.darkness(time_s)
         night = float(np.clip((darkness - 0.5) * 2.0, 0.0, 1.0))
-        exposure_s = (0.35 + 0.55 * darkness) / config.fps
+        # Exposure: ~4 ms by day, ~13 ms at dusk, ~30 ms at night (at 30 fps).
+        exposure_s = (0.12 + 0.78 * darkness) / config.fps
         rng = np.random.default_rng([config.seed, 4, index])
 
         image = self._background(pose)

@@ -20,8 +20,10 @@ header, naming these columns in any order (further columns are ignored):
 =============  ===============================================================
 
 One row per frame in which the sign is visible (``speed_sign_synth`` lists a sign
-while its radius is at least 5 px and 3/4 of its box lies inside the image). A sign that is not a speed limit (``limit_kmh = 0``) must still be listed
-when it is a look-alike: evaluation counts a limit reported on it as a false limit.
+while its radius is at least 5 px and 3/4 of its box lies inside the image). Signs
+that set no limit (``limit_kmh = 0``: look-alikes, end-of-limit signs) are listed too:
+evaluation counts a limit reported on them as a wrong limit, and checks that
+end-of-limit signs (kind ``end_of_limit...``) are read as such.
 Example::
 
     # speed_sign_synth seed=1 fps=30 lighting=day

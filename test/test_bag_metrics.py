@@ -77,3 +77,15 @@ def test_position_decides_between_two_signs_of_the_same_value() -> None:
 def test_drive_without_limit_signs_has_no_recall() -> None:
     score = score_drive(group_tracks(sign_rows(1, 'no_entry', 0, 0, 10)), [], STAMPS)
     assert score.signs == 0 and score.recall is None and score.wrong_limits == 0
+
+
+def test_end_of_limit_recognitions_are_matched_to_end_of_limit_signs() -> None:
+    tracks = group_tracks(sign_rows(1, '50', 50, 0, 20)
+                          + sign_rows(2, 'end_of_limit_50', 0, 30, 45))
+    events = [LimitEvent(STAMPS[10], 50), LimitEvent(STAMPS[40], 0),   # right
+              LimitEvent(STAMPS[15], 0), LimitEvent(STAMPS[70], 0)]     # wrong twice
+    score = score_drive(tracks, events, STAMPS)
+    assert (score.end_of_limit_signs, score.end_of_limit_recognized) == (1, 1)
+    assert score.wrong_end_of_limits == 2
+    assert score.wrong_limits == 0 and score.recall == 1.0
+    assert score.outcomes[0].wrong_values == [0]

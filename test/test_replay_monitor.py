@@ -22,10 +22,11 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
-from sensor_msgs.msg import Image
+from sensor_msgs.msg import CompressedImage, Image
 
 from speed_sign_detector.bag_io import BagReader
 from speed_sign_detector.synthetic import DriveConfig, SyntheticDrive
+from speed_sign_detector.tools.monitor import MonitorSnapshot
 from speed_sign_detector.tools.replay import to_rclpy
 from speed_sign_detector.tools.synth import write_drive
 
@@ -57,21 +58,27 @@ def env() -> dict[str, str]:
 @pytest.fixture(scope='module')
 def bags(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     folder = tmp_path_factory.mktemp('bags')
-    drive = SyntheticDrive(CONFIG)
-    paths = {'mcap': folder / 'drive_mcap', 'ros1': folder / 'drive.bag'}
-    for bag_format, path in paths.items():
-        write_drive(drive, path, bag_format, topic=TOPIC)
+    frames = list(SyntheticDrive(CONFIG))
+    paths = {'mcap': folder / 'drive_mcap', 'ros1': folder / 'drive.bag',
+             'mcap_jpeg': folder / 'drive_mcap_jpeg', 'ros1_jpeg': folder / 'drive_jpeg.bag'}
+    for name, path in paths.items():
+        write_drive(frames, path, name.split('_')[0], compressed=name.endswith('jpeg'),
+                    topic=TOPIC)
     return paths
 
 
-def test_ros1_messages_convert_to_the_same_ros2_messages(bags: dict[str, Path]) -> None:
-    with BagReader(bags['mcap']) as ros2_bag, BagReader(bags['ros1']) as ros1_bag:
+@pytest.mark.parametrize('encoding', ['', '_jpeg'])
+def test_ros1_messages_convert_to_the_same_ros2_messages(bags: dict[str, Path],
+                                                         encoding: str) -> None:
+    message_class = CompressedImage if encoding else Image
+    with BagReader(bags[f'mcap{encoding}']) as ros2_bag, \
+            BagReader(bags[f'ros1{encoding}']) as ros1_bag:
         ros2_items = list(ros2_bag.messages(TOPIC))
         ros1_items = list(ros1_bag.messages(TOPIC))
     assert len(ros1_items) == len(ros2_items) == FRAMES
     for ros1_item, ros2_item in zip(ros1_items, ros2_items):
-        converted = to_rclpy(ros1_item, Image)
-        original = deserialize_message(ros2_item.raw, Image)
+        converted = to_rclpy(ros1_item, message_class)
+        original = deserialize_message(ros2_item.raw, message_class)
         assert converted == original
 
 
@@ -131,10 +138,12 @@ def test_replay_publishes_every_frame_with_recorded_stamps(
 
 
 def test_replay_node_monitor_loop(bags: dict[str, Path], env: dict[str, str],
-                                  tmp_path: Path) -> None:
+                                  tmp_path: Path, pytestconfig: pytest.Config) -> None:
+    bank_cache = pytestconfig.cache.mkdir('speed_sign_filter_banks')
     node_log = (tmp_path / 'node.log').open('w')
     node = subprocess.Popen([*tool('speed_sign_detector'), '--ros-args', '-r',
-                             f'image:={TOPIC}', '-p', 'diagnostics_period_s:=0.5'],
+                             f'image:={TOPIC}', '-p', 'diagnostics_period_s:=0.5',
+                             '-p', f'classifier.cache_dir:={bank_cache}'],
                             env=env, stdout=node_log, stderr=subprocess.STDOUT)
     try:
         replay = subprocess.Popen([*tool('speed_sign_replay'), str(bags['mcap']), '--loop',
@@ -162,3 +171,18 @@ def test_replay_node_monitor_loop(bags: dict[str, Path], env: dict[str, str],
     assert snapshot['frames_processed'] >= 1
     assert snapshot['backend'] in ('gl', 'numpy')
     assert snapshot['status_level'] in ('OK', 'WARN')
+
+
+def test_status_line_shows_what_is_known() -> None:
+    empty = MonitorSnapshot().status_line()
+    assert empty.startswith('limit - | candidates - ')
+    line = MonitorSnapshot(active_limit_kmh=50, candidates_per_frame=3,
+                           candidates_per_frame_mean=2.5, fps=14.2,
+                           processing_latency_p50_ms=40.0, processing_latency_p95_ms=61.0,
+                           latency_p50_ms=55.0, latency_p95_ms=80.0, frames_processed=100,
+                           frames_dropped=4, backend='gl', status_level='OK').status_line()
+    assert line == ('limit 50 km/h | candidates 3 (mean 2.5) | fps 14.2 | processing p50 40 '
+                    'p95 61 ms | stamp latency p50 55 p95 80 ms | processed 100 dropped 4 | '
+                    'gl OK')
+    replayed = MonitorSnapshot(active_limit_kmh=0, latency_p50_ms=9e10).status_line()
+    assert 'limit none' in replayed and 'stamp latency old stamps' in replayed

@@ -55,32 +55,32 @@ class BlockMaxima:
     band: np.ndarray
 
 
-def score_normaliser() -> float:
-    """Factor making a complete circle score 1: ``1 / (2 pi)``.
+def score_normaliser(vote_directions: int) -> float:
+    """Factor making a complete circle score 1: ``1 / (2 pi x vote_directions)``.
 
     Every edge pixel of a circle of radius R votes ``1 / R`` at its centre, and there are
-    about ``2 pi R`` of them.
+    about ``2 pi R`` of them; a band whose edges vote toward both sides (two directions)
+    collects up to twice that (inner and outer edge of the ring), and so does clutter.
     """
-    return 1.0 / (2.0 * math.pi)
+    return 1.0 / (2.0 * math.pi * vote_directions)
 
 
-def band_scores(votes: np.ndarray, direction_balance: float) -> np.ndarray:
-    """Direction-balanced score of a band's vote image (H, W, CHANNELS) -> (H, W) float32.
+def band_scores(votes: np.ndarray, normaliser: float) -> np.ndarray:
+    """Score of a band's vote image (H, W, CHANNELS) -> (H, W) float32: ``sum w x normaliser``.
 
-    ``(sum w - direction_balance |sum w v|) / 2 pi``: the weighted vote minus the resultant
-    of the vote directions. A complete circle scores 1 (its votes come from all sides and
-    their resultant vanishes); votes from one side only (a straight edge, a corner) are
-    discounted by up to ``direction_balance``.
+    With :func:`score_normaliser`, about the fraction of a complete circle that voted for
+    the pixel (1 = complete).
     """
-    resultant = np.sqrt(votes[..., 1] * votes[..., 1] + votes[..., 2] * votes[..., 2])
-    score = (votes[..., 0] - np.float32(direction_balance) * resultant)
-    return (score * np.float32(score_normaliser())).astype(np.float32)
+    return (votes[..., 0] * np.float32(normaliser)).astype(np.float32)
 
 
 def block_maxima(votes: Sequence[np.ndarray], bands: Sequence[RadiusBand],
                  frame_shape: tuple[int, int], block_px: int,
-                 direction_balance: float) -> BlockMaxima:
-    """Per-block best pixel over all bands, the numpy twin of the GL reduction shader."""
+                 normalisers: Sequence[float]) -> BlockMaxima:
+    """Per-block best pixel over all bands, the numpy twin of the GL reduction shader.
+
+    ``normalisers[b]`` scales band ``b``'s votes to its score (see :func:`score_normaliser`).
+    """
     height, width = frame_shape
     rows, cols = -(-height // block_px), -(-width // block_px)
     best = np.full((rows, cols), -1.0, np.float32)
@@ -88,8 +88,8 @@ def block_maxima(votes: Sequence[np.ndarray], bands: Sequence[RadiusBand],
     y_px = np.zeros((rows, cols), np.float32)
     radius_px = np.zeros((rows, cols), np.float32)
     band_index = np.zeros((rows, cols), np.int32)
-    for band, image in zip(bands, votes):
-        score = band_scores(image, direction_balance)
+    for band, image, normaliser in zip(bands, votes, normalisers):
+        score = band_scores(image, normaliser)
         level_height, level_width = score.shape
         step = max(1, block_px // band.target_scale)
         padded = np.full((rows * step, cols * step), -np.inf, np.float32)
@@ -116,7 +116,7 @@ def block_maxima(votes: Sequence[np.ndarray], bands: Sequence[RadiusBand],
         best[better] = centre
         x_px[better] = band.target_scale * (qx + offset_x) + half_step
         y_px[better] = band.target_scale * (qy + offset_y) + half_step
-        radius_px[better] = image[qy, qx, 3] / image[qy, qx, 0] * band.scale
+        radius_px[better] = image[qy, qx, 1] / image[qy, qx, 0] * band.scale
         band_index[better] = band.index
     return BlockMaxima(best, x_px, y_px, radius_px, band_index)
 

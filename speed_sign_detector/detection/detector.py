@@ -15,10 +15,10 @@ import numpy as np
 
 from speed_sign_detector.config import DetectorConfig
 from speed_sign_detector.detection.candidates import (
-    BlockMaxima, Candidate, block_maxima, select_candidates)
+    BlockMaxima, Candidate, block_maxima, score_normaliser, select_candidates)
 from speed_sign_detector.detection.gradients import validate_frame
 from speed_sign_detector.detection.voting_numpy import (
-    RadiusBand, min_frame_size_px, plan_bands, vote_images)
+    RadiusBand, min_frame_size_px, plan_bands, vote_images, vote_signs)
 from speed_sign_detector.errors import ConfigError, DetectorError
 
 LOGGER = logging.getLogger(__name__)
@@ -54,6 +54,8 @@ class Detector:
         self.config = config
         self.bands: tuple[RadiusBand, ...] = plan_bands(config)
         self.min_size_px = min_frame_size_px(config)
+        self.score_normalisers: tuple[float, ...] = tuple(
+            score_normaliser(len(vote_signs(config, band))) for band in self.bands)
         self.fallback_reason: str | None = None
         self._gl = None
         if backend in ('auto', 'gl'):
@@ -95,15 +97,14 @@ class Detector:
         if self._gl is not None:
             return self._gl.block_maxima(frame)
         return block_maxima(vote_images(frame, self.config), self.bands, frame.shape,
-                            self.config.block_size_px, self.config.direction_balance)
+                            self.config.block_size_px, self.score_normalisers)
 
     def vote_images(self, gray: np.ndarray) -> list[np.ndarray]:
         """Vote image of every radius band (for tests and pictures).
 
         Returns:
             one (H_level, W_level, CHANNELS) float32 array per band of ``self.bands``:
-            channels ``(sum w, sum w v_x, sum w v_y, count)`` with ``w = 1 / distance`` and
-            ``v`` the unit vote direction (see :mod:`.voting_numpy`). Band ``b`` is at pyramid level ``self.bands[b].level``.
+            channels ``(sum w, count)`` with ``w = 1 / distance`` (see :mod:`.voting_numpy`). Band ``b`` is at pyramid level ``self.bands[b].level``.
         """
         frame = self._check(gray)
         if self._gl is not None:

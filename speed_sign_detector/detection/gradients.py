@@ -17,6 +17,7 @@ compute shaders. Conventions shared by both backends:
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -87,9 +88,23 @@ def validate_frame(gray: np.ndarray, min_size_px: int) -> np.ndarray:
     return np.ascontiguousarray(frame)
 
 
-def build_pyramid(gray: np.ndarray, levels: int) -> list[np.ndarray]:
-    """Float32 box-filter pyramid: ``levels`` images, level 0 = ``gray`` as float32."""
-    pyramid = [gray.astype(np.float32)]
+def gray_lookup(contrast: str, log_offset_gray: float) -> np.ndarray:
+    """(256,) float32 table: gray level -> value the gradients are taken on.
+
+    ``'linear'``: the gray level itself. ``'log'``: ``255 ln((I + c) / c) / ln((255 + c) / c)``
+    (same 0..255 range; a step between two gray levels then depends on their ratio).
+    """
+    levels = np.arange(256, dtype=np.float64)
+    if contrast == 'linear':
+        return levels.astype(np.float32)
+    offset = float(log_offset_gray)
+    return (255.0 * np.log((levels + offset) / offset)
+            / math.log((255.0 + offset) / offset)).astype(np.float32)
+
+
+def build_pyramid(gray: np.ndarray, levels: int, lookup: np.ndarray) -> list[np.ndarray]:
+    """Float32 box-filter pyramid: ``levels`` images, level 0 = ``lookup[gray]``."""
+    pyramid = [lookup[gray]]
     for _ in range(1, levels):
         previous = pyramid[-1]
         height, width = previous.shape[0] // 2, previous.shape[1] // 2
@@ -114,7 +129,7 @@ def sobel(image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def extract_edges(image: np.ndarray, level: int, threshold: float,
-                  thin: bool) -> EdgeList:
+                  thin: bool, min_support: int = 0) -> EdgeList:
     """Edge pixels of one pyramid level (float32 (H, W) gray image).
 
     Args:
@@ -122,6 +137,9 @@ def extract_edges(image: np.ndarray, level: int, threshold: float,
         level: its pyramid level (recorded in the result).
         threshold: minimum Sobel magnitude.
         thin: apply non-maximum suppression along the gradient.
+        min_support: keep an edge pixel only when at least this many of its 8 neighbours
+            are edge pixels whose gradient direction is within SUPPORT_ANGLE_DEG of its
+            own (a smooth contour such as a sign's ring, not isolated texture).
     """
     gx, gy = sobel(image)
     magnitude = np.sqrt(gx * gx + gy * gy)
@@ -130,9 +148,36 @@ def extract_edges(image: np.ndarray, level: int, threshold: float,
     keep[:, 0] = keep[:, -1] = False
     if thin:
         keep &= _is_ridge(magnitude, gx, gy)
+    if min_support > 0:
+        keep &= _support(keep, gx, gy, magnitude) >= min_support
     rows, cols = np.nonzero(keep)
     return EdgeList(cols.astype(np.float32), rows.astype(np.float32),
                     gx[rows, cols], gy[rows, cols], level, image.shape[1], image.shape[0])
+
+
+SUPPORT_ANGLE_DEG = 30.0
+"""Largest direction difference of two neighbouring edge pixels that support each other."""
+
+
+def _support(keep: np.ndarray, gx: np.ndarray, gy: np.ndarray,
+             magnitude: np.ndarray) -> np.ndarray:
+    """Number of 8-neighbours of each pixel that are edges with a similar direction."""
+    height, width = keep.shape
+    with np.errstate(divide='ignore', invalid='ignore'):
+        unit_x = np.where(keep, gx / magnitude, 0.0).astype(np.float32)
+        unit_y = np.where(keep, gy / magnitude, 0.0).astype(np.float32)
+    pad_keep = np.pad(keep, 1)
+    pad_x, pad_y = np.pad(unit_x, 1), np.pad(unit_y, 1)
+    cosine = np.float32(math.cos(math.radians(SUPPORT_ANGLE_DEG)))
+    count = np.zeros(keep.shape, np.int32)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            if dx == 0 and dy == 0:
+                continue
+            window = (slice(1 + dy, 1 + dy + height), slice(1 + dx, 1 + dx + width))
+            similar = (unit_x * pad_x[window] + unit_y * pad_y[window]) >= cosine
+            count += pad_keep[window] & similar
+    return count
 
 
 def _is_ridge(magnitude: np.ndarray, gx: np.ndarray, gy: np.ndarray) -> np.ndarray:

@@ -29,11 +29,13 @@ import numpy as np
 
 from speed_sign_detector.config import DetectorConfig
 from speed_sign_detector.detection.candidates import BlockMaxima, score_normaliser
+from speed_sign_detector.detection.gradients import gray_lookup
 from speed_sign_detector.detection.voting_numpy import (
-    CHANNELS, SPREAD, RadiusBand, level_size, plan_bands, pyramid_levels, vote_signs)
+    CHANNELS, SPREAD, SUPPORT_ANGLE_DEG, RadiusBand, level_size, plan_bands, pyramid_levels, vote_signs)
 from speed_sign_detector.errors import DetectorError
 
 _GROUP = 8
+_VERTICES_PER_EDGE = 3
 
 _CONVERT_SRC = """
 #version 430
@@ -41,10 +43,11 @@ layout(local_size_x = 8, local_size_y = 8) in;
 layout(binding = 0) uniform usampler2D frame;
 layout(r32f, binding = 0) writeonly uniform image2D level0;
 uniform ivec2 size;
+uniform float lookup[256];
 void main() {
     ivec2 p = ivec2(gl_GlobalInvocationID.xy);
     if (p.x >= size.x || p.y >= size.y) return;
-    imageStore(level0, p, vec4(float(texelFetch(frame, p, 0).r)));
+    imageStore(level0, p, vec4(lookup[texelFetch(frame, p, 0).r]));
 }
 """
 
@@ -87,38 +90,68 @@ void main() {
 }
 """
 
+_RIDGE_SRC = """
+#version 430
+layout(local_size_x = 8, local_size_y = 8) in;
+layout(rgba32f, binding = 1) readonly uniform image2D gradient;
+layout(r32f, binding = 2) writeonly uniform image2D ridge;
+uniform ivec2 size;
+uniform float threshold;
+uniform bool thin;
+bool is_ridge(ivec2 p) {
+    if (p.x < 1 || p.y < 1 || p.x >= size.x - 1 || p.y >= size.y - 1) return false;
+    vec4 g = imageLoad(gradient, p);
+    if (!(g.z >= threshold)) return false;
+    if (!thin) return true;
+    float ax = abs(g.x), ay = abs(g.y);
+    const float tan22 = 0.41421357;
+    ivec2 d;
+    if (ay <= tan22 * ax) d = ivec2(1, 0);
+    else if (ax <= tan22 * ay) d = ivec2(0, 1);
+    else if (g.x * g.y > 0.0) d = ivec2(1, 1);
+    else d = ivec2(-1, 1);
+    float m_ahead = imageLoad(gradient, p + d).z;
+    float m_behind = imageLoad(gradient, p - d).z;
+    return g.z > m_behind && g.z >= m_ahead;
+}
+void main() {
+    ivec2 p = ivec2(gl_GlobalInvocationID.xy);
+    if (p.x >= size.x || p.y >= size.y) return;
+    imageStore(ridge, p, vec4(is_ridge(p) ? 1.0 : 0.0));
+}
+"""
+
 _EDGES_SRC = """
 #version 430
 layout(local_size_x = 8, local_size_y = 8) in;
 layout(rgba32f, binding = 1) readonly uniform image2D gradient;
+layout(r32f, binding = 2) readonly uniform image2D ridge;
 layout(std430, binding = 0) buffer Command { uint command[4]; };
 layout(std430, binding = 1) writeonly buffer Edges { vec4 edges[]; };
 uniform ivec2 size;
-uniform float threshold;
-uniform bool thin;
 uniform uint vertices_per_edge;
+uniform int min_support;
+uniform float support_cosine;
 void main() {
     ivec2 p = ivec2(gl_GlobalInvocationID.xy);
     if (p.x < 1 || p.y < 1 || p.x >= size.x - 1 || p.y >= size.y - 1) return;
+    if (imageLoad(ridge, p).r == 0.0) return;
     vec4 g = imageLoad(gradient, p);
-    if (!(g.z >= threshold)) return;
-    if (thin) {
-        float ax = abs(g.x), ay = abs(g.y);
-        const float tan22 = 0.41421357;
-        ivec2 d;
-        if (ay <= tan22 * ax) d = ivec2(1, 0);
-        else if (ax <= tan22 * ay) d = ivec2(0, 1);
-        else if (g.x * g.y > 0.0) d = ivec2(1, 1);
-        else d = ivec2(-1, 1);
-        ivec2 ahead = p + d, behind = p - d;
-        float m_ahead = (ahead.x < size.x && ahead.y < size.y && ahead.x >= 0)
-            ? imageLoad(gradient, ahead).z : 0.0;
-        float m_behind = (behind.x >= 0 && behind.y >= 0 && behind.x < size.x)
-            ? imageLoad(gradient, behind).z : 0.0;
-        if (!(g.z > m_behind && g.z >= m_ahead)) return;
+    vec2 direction = g.xy / g.z;
+    if (min_support > 0) {
+        int support = 0;
+        for (int dy = -1; dy <= 1; ++dy) {
+            for (int dx = -1; dx <= 1; ++dx) {
+                ivec2 q = p + ivec2(dx, dy);
+                if ((dx == 0 && dy == 0) || imageLoad(ridge, q).r == 0.0) continue;
+                vec4 h = imageLoad(gradient, q);
+                if (dot(direction, h.xy / h.z) >= support_cosine) support += 1;
+            }
+        }
+        if (support < min_support) return;
     }
     uint index = atomicAdd(command[0], vertices_per_edge) / vertices_per_edge;
-    edges[index] = vec4(vec2(p), g.x / g.z, g.y / g.z);
+    edges[index] = vec4(vec2(p), direction);
 }
 """
 
@@ -128,22 +161,21 @@ layout(std430, binding = 1) readonly buffer Edges { vec4 edges[]; };
 uniform vec2 size;
 uniform float max_radius;
 uniform float spread;
-uniform float first_sign;
+uniform float vote_sign;
 uniform float shrink;
-uniform int vertices_per_edge;
 noperspective out float distance_along;
-flat out vec2 direction;
+noperspective out float distance_across;
 void main() {
-    vec4 edge = edges[gl_VertexID / vertices_per_edge];
-    int vertex = gl_VertexID % vertices_per_edge;
-    int corner = vertex % 3;
-    direction = (vertex < 3 ? first_sign : -first_sign) * edge.zw;
+    vec4 edge = edges[gl_VertexID / VERTICES_PER_EDGE];
+    int corner = gl_VertexID % VERTICES_PER_EDGE;
+    vec2 direction = vote_sign * edge.zw;
     vec2 normal = vec2(-direction.y, direction.x);
     float r = corner == 0 ? 0.0 : max_radius;
     float side = corner == 1 ? 1.0 : -1.0;
     vec2 position = (edge.xy + 0.5) * shrink - 0.5
         + (r * shrink) * (direction + side * spread * normal);
     distance_along = r;
+    distance_across = r * side * spread;
     gl_Position = vec4((position + 0.5) / size * 2.0 - 1.0, 0.0, 1.0);
 }
 """
@@ -151,13 +183,19 @@ void main() {
 _VOTE_FRAGMENT_SRC = """
 #version 430
 noperspective in float distance_along;
-flat in vec2 direction;
+noperspective in float distance_across;
 uniform float min_radius;
+uniform float split_radius;
+uniform float spread;
+uniform bool tent;
 layout(location = 0) out vec4 votes;
 void main() {
     if (distance_along < min_radius) discard;
-    float weight = 1.0 / distance_along;
-    votes = vec4(weight, weight * direction, 1.0);
+    float profile = tent ? clamp(1.0 - abs(distance_across) / (spread * distance_along),
+                                 0.0, 1.0) : 1.0;
+    float weight = profile / distance_along;
+    votes = distance_along < split_radius ? vec4(weight, profile, 0.0, 0.0)
+                                          : vec4(0.0, 0.0, weight, profile);
 }
 """
 
@@ -173,11 +211,11 @@ uniform int block_level_px;
 uniform int scale;
 uniform int target_scale;
 uniform int band;
+uniform int slot;
 uniform float normaliser;
-uniform float direction_balance;
 float score_at(ivec2 q) {
     vec4 v = texelFetch(votes, q, 0);
-    return (v.x - direction_balance * length(v.yz)) * normaliser;
+    return (slot == 0 ? v.r : v.b) * normaliser;
 }
 float score_clamped(ivec2 q) {
     return score_at(clamp(q, ivec2(0), level_size - 1));
@@ -208,7 +246,8 @@ void main() {
     float oy = offset(score_clamped(best_q - ivec2(0, 1)), best,
                       score_clamped(best_q + ivec2(0, 1)));
     vec4 v = texelFetch(votes, best_q, 0);
-    float radius = v.w / v.x * float(scale);
+    vec2 band_votes = slot == 0 ? v.rg : v.ba;
+    float radius = band_votes.y / band_votes.x * float(scale);
     float half_step = 0.5 * float(target_scale - 1);
     blocks[index].score_x_y_radius = vec4(best, float(target_scale) * (float(best_q.x) + ox) + half_step,
                                           float(target_scale) * (float(best_q.y) + oy) + half_step,
@@ -226,17 +265,37 @@ class _LevelResources:
     height_px: int
     image: object
     gradient: object
+    ridge: object
     edges: object
     command: object
 
 
 @dataclass
-class _BandResources:
-    """Vote targets of one radius band."""
+class _DrawGroup:
+    """One or two adjacent bands with the same edge and vote levels: one draw.
 
-    band: RadiusBand
+    The RGBA32F target holds ``(sum w, n)`` of the first band in RG and of the second
+    in BA; the fragment shader routes a vote by its distance.
+    """
+
+    bands: tuple[RadiusBand, ...]
     target: object
     framebuffer: object
+
+
+def _draw_groups(config: DetectorConfig,
+                 bands: tuple[RadiusBand, ...]) -> list[tuple[RadiusBand, ...]]:
+    """Pairs of adjacent bands that share edge level, vote level and vote directions."""
+    groups: list[tuple[RadiusBand, ...]] = []
+    for band in bands:
+        last = groups[-1] if groups else ()
+        if (len(last) == 1 and last[0].level == band.level
+                and last[0].target_level == band.target_level
+                and vote_signs(config, last[0]) == vote_signs(config, band)):
+            groups[-1] = (last[0], band)
+        else:
+            groups.append((band,))
+    return groups
 
 
 class GLVoter:
@@ -261,18 +320,25 @@ class GLVoter:
             self._convert = self._ctx.compute_shader(_CONVERT_SRC)
             self._downsample = self._ctx.compute_shader(_DOWNSAMPLE_SRC)
             self._gradient = self._ctx.compute_shader(_GRADIENT_SRC)
+            self._ridge = self._ctx.compute_shader(_RIDGE_SRC)
             self._extract = self._ctx.compute_shader(_EDGES_SRC)
             self._reduce = self._ctx.compute_shader(_REDUCE_SRC)
-            self._vote = self._ctx.program(vertex_shader=_VOTE_VERTEX_SRC,
-                                           fragment_shader=_VOTE_FRAGMENT_SRC)
+            vertices_per_edge = _VERTICES_PER_EDGE
+            self._vote = self._ctx.program(
+                vertex_shader=_VOTE_VERTEX_SRC.replace(
+                    '#version 430',
+                    f'#version 430\n#define VERTICES_PER_EDGE {vertices_per_edge}'),
+                fragment_shader=_VOTE_FRAGMENT_SRC)
             self._vote_array = self._ctx.vertex_array(self._vote, [])
         except Exception as err:
             self._ctx.release()
             raise DetectorError(f'GL voting shaders failed to build: {err}') from err
+        self._convert['lookup'].write(gray_lookup(config.contrast,
+                                                  config.log_offset_gray).tobytes())
         self._size: tuple[int, int] | None = None
         self._frame = None
         self._levels: list[_LevelResources] = []
-        self._band_targets: list[_BandResources] = []
+        self._groups: list[_DrawGroup] = []
         self._blocks = None
         self._blocks_shape = (0, 0)
         self._released = False
@@ -322,15 +388,16 @@ class GLVoter:
         """Vote images of every band, (H_level, W_level, CHANNELS) float32 each."""
         self._run_votes(gray)
         images = []
-        for resources in self._band_targets:
-            width, height = resources.target.size
-            images.append(np.frombuffer(resources.target.read(), np.float32).reshape(
-                height, width, CHANNELS).copy())
+        for group in self._groups:
+            width, height = group.target.size
+            pixels = np.frombuffer(group.target.read(), np.float32).reshape(height, width, 4)
+            for slot in range(len(group.bands)):
+                images.append(pixels[..., CHANNELS * slot:CHANNELS * (slot + 1)].copy())
         return images
 
     def edge_counts(self) -> list[int]:
         """Edge pixels per pyramid level of the last frame (reads 16 bytes per level)."""
-        per_edge = 3 * len(vote_signs(self._config.polarity))
+        per_edge = _VERTICES_PER_EDGE
         return [int(np.frombuffer(level.command.read(), np.uint32)[0]) // per_edge
                 for level in self._levels]
 
@@ -349,15 +416,16 @@ class GLVoter:
                 level_width, level_height,
                 image=ctx.texture((level_width, level_height), 1, dtype='f4'),
                 gradient=ctx.texture((level_width, level_height), 4, dtype='f4'),
+                ridge=ctx.texture((level_width, level_height), 1, dtype='f4'),
                 edges=ctx.buffer(reserve=16 * level_width * level_height),
                 command=ctx.buffer(reserve=16)))
             level_width, level_height = level_width // 2, level_height // 2
-        self._band_targets = []
-        for band in self._bands:
-            size = level_size(width, height, band.target_level)
-            target = ctx.texture(size, CHANNELS, dtype='f4')
-            self._band_targets.append(_BandResources(
-                band, target, ctx.framebuffer(color_attachments=[target])))
+        self._groups = []
+        for bands in _draw_groups(self._config, self._bands):
+            size = level_size(width, height, bands[0].target_level)
+            target = ctx.texture(size, 4, dtype='f4')
+            self._groups.append(_DrawGroup(bands, target,
+                                           ctx.framebuffer(color_attachments=[target])))
         block = self._config.block_size_px
         self._blocks_shape = (-(-height // block), -(-width // block))
         self._blocks = ctx.buffer(reserve=32 * self._blocks_shape[0] * self._blocks_shape[1])
@@ -366,14 +434,14 @@ class GLVoter:
     def _release_size_resources(self) -> None:
         objects = [self._frame, self._blocks]
         for level in self._levels:
-            objects += [level.image, level.gradient, level.edges, level.command]
-        for resources in self._band_targets:
-            objects += [resources.framebuffer, resources.target]
+            objects += [level.image, level.gradient, level.ridge, level.edges, level.command]
+        for group in self._groups:
+            objects += [group.framebuffer, group.target]
         for item in objects:
             if item is not None:
                 item.release()
         self._frame, self._blocks = None, None
-        self._levels, self._band_targets = [], []
+        self._levels, self._groups = [], []
         self._size = None
 
     def _run_votes(self, gray: np.ndarray) -> None:
@@ -396,10 +464,11 @@ class GLVoter:
             self._downsample.run(_groups(coarser.width_px), _groups(coarser.height_px))
             ctx.memory_barrier()
         self._stage('upload_pyramid')
-        vertices = 3 * len(vote_signs(self._config.polarity))
-        self._extract['vertices_per_edge'] = vertices
-        self._extract['threshold'] = float(self._config.gradient_threshold)
-        self._extract['thin'] = bool(self._config.thin_edges)
+        self._extract['vertices_per_edge'] = _VERTICES_PER_EDGE
+        self._extract['min_support'] = self._config.edge_support
+        self._extract['support_cosine'] = math.cos(math.radians(SUPPORT_ANGLE_DEG))
+        self._ridge['threshold'] = float(self._config.gradient_threshold)
+        self._ridge['thin'] = bool(self._config.thin_edges)
         for level in self._levels:
             level.image.bind_to_image(0, read=True, write=False)
             level.gradient.bind_to_image(1, read=False, write=True)
@@ -409,6 +478,11 @@ class GLVoter:
             self._stage('gradient')
             level.command.write(np.array([0, 1, 0, 0], np.uint32).tobytes())
             level.gradient.bind_to_image(1, read=True, write=False)
+            level.ridge.bind_to_image(2, read=False, write=True)
+            self._ridge['size'] = (level.width_px, level.height_px)
+            self._ridge.run(_groups(level.width_px), _groups(level.height_px))
+            ctx.memory_barrier()
+            level.ridge.bind_to_image(2, read=True, write=False)
             level.command.bind_to_storage_buffer(0)
             level.edges.bind_to_storage_buffer(1)
             self._extract['size'] = (level.width_px, level.height_px)
@@ -421,19 +495,23 @@ class GLVoter:
         ctx.blend_func = moderngl.ONE, moderngl.ONE
         ctx.blend_equation = moderngl.FUNC_ADD
         self._vote['spread'] = SPREAD
-        self._vote['first_sign'] = vote_signs(self._config.polarity)[0]
-        self._vote['vertices_per_edge'] = vertices
-        for resources in self._band_targets:
-            level = self._levels[resources.band.level]
-            r0, r1 = resources.band.level_radii
-            resources.framebuffer.use()
-            resources.framebuffer.clear(0.0, 0.0, 0.0, 0.0)
-            self._vote['size'] = tuple(float(extent) for extent in resources.target.size)
-            self._vote['shrink'] = resources.band.shrink
-            self._vote['max_radius'] = r1
-            self._vote['min_radius'] = r0
+        self._vote['tent'] = self._config.vote_profile == 'tent'
+        for group in self._groups:
+            first, last = group.bands[0], group.bands[-1]
+            level = self._levels[first.level]
+            group.framebuffer.use()
+            group.framebuffer.clear(0.0, 0.0, 0.0, 0.0)
+            self._vote['size'] = tuple(float(extent) for extent in group.target.size)
+            self._vote['shrink'] = first.shrink
+            self._vote['min_radius'] = first.level_radii[0]
+            self._vote['max_radius'] = last.level_radii[1]
+            self._vote['split_radius'] = (first.level_radii[1] if len(group.bands) == 2
+                                          else 3.0e38)
             level.edges.bind_to_storage_buffer(1)
-            self._vote_array.render_indirect(level.command, mode=moderngl.TRIANGLES, count=1)
+            for sign in vote_signs(self._config, first):
+                self._vote['vote_sign'] = sign
+                self._vote_array.render_indirect(level.command, mode=moderngl.TRIANGLES,
+                                                 count=1)
         ctx.disable(moderngl.BLEND)
         ctx.memory_barrier()
         self._stage('vote')
@@ -446,18 +524,19 @@ class GLVoter:
         self._blocks.bind_to_storage_buffer(2)
         block = self._config.block_size_px
         self._reduce['blocks_size'] = (cols, rows)
-        for resources in self._band_targets:
-            band = resources.band
-            resources.target.use(0)
-            self._reduce['level_size'] = resources.target.size
-            self._reduce['block_level_px'] = max(1, block // band.target_scale)
-            self._reduce['scale'] = band.scale
-            self._reduce['target_scale'] = band.target_scale
-            self._reduce['band'] = band.index
-            self._reduce['normaliser'] = score_normaliser()
-            self._reduce['direction_balance'] = self._config.direction_balance
-            self._reduce.run(_groups(cols), _groups(rows))
-            self._ctx.memory_barrier()
+        for group in self._groups:
+            group.target.use(0)
+            for slot, band in enumerate(group.bands):
+                self._reduce['slot'] = slot
+                self._reduce['level_size'] = group.target.size
+                self._reduce['block_level_px'] = max(1, block // band.target_scale)
+                self._reduce['scale'] = band.scale
+                self._reduce['target_scale'] = band.target_scale
+                self._reduce['band'] = band.index
+                self._reduce['normaliser'] = score_normaliser(
+                    len(vote_signs(self._config, band)))
+                self._reduce.run(_groups(cols), _groups(rows))
+                self._ctx.memory_barrier()
         self._stage('reduce')
 
 

@@ -15,13 +15,13 @@ Radius bands are geometric between ``min_radius_px`` and ``max_radius_px``; band
 votes on the coarsest pyramid level on which its smallest radius is still at least
 ``level_min_radius_px`` level pixels (fewer edges, 4x fewer fragments per octave).
 
-The vote image of one band has ``CHANNELS = 4`` channels per pixel:
-``(sum w, sum w v_x, sum w v_y, n)`` over the ``n`` votes it received, ``w = 1 / u`` and
-``v`` the unit vote direction. ``|sum w v|`` is the resultant of the vote directions: 0
-for a complete circle (votes from every side cancel), ``sum w`` for a straight edge
-(all votes from one side), so ``sum w - |sum w v|`` weighs a centre by how evenly the
-directions around it voted; ``n / sum w`` is the harmonic mean voting distance, the
-radius estimate.
+The vote image of one band has ``__all__ = ['CHANNELS', 'SPREAD', 'SUPPORT_ANGLE_DEG', 'RadiusBand', 'plan_bands', 'vote_images']
+
+CHANNELS = 2`` channels per pixel: ``(sum w, n)`` over
+the ``n`` votes it received; ``n / sum w`` is the harmonic mean voting distance, the
+radius estimate. (A direction-balance term, the resultant of the vote directions, was
+tried and lowered recall on GTSDB: isotropic clutter such as foliage votes from all
+sides too.)
 """
 from __future__ import annotations
 
@@ -31,10 +31,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from speed_sign_detector.config import DetectorConfig
-from speed_sign_detector.detection.gradients import EdgeList, build_pyramid, extract_edges
+from speed_sign_detector.detection.gradients import (
+    SUPPORT_ANGLE_DEG, EdgeList, build_pyramid, extract_edges, gray_lookup)
 
-CHANNELS = 4
-"""Channels of a band's vote image: ``(sum w, sum w v_x, sum w v_y, vote count)``."""
+__all__ = ['CHANNELS', 'SPREAD', 'SUPPORT_ANGLE_DEG', 'RadiusBand', 'plan_bands', 'vote_images']
+
+CHANNELS = 2
+"""Channels of a band's vote image: ``(sum w, vote count)``."""
 SPREAD = math.tan(math.pi / 8.0)
 """Half-width of the vote spread per unit distance (octagon, n = 8)."""
 
@@ -89,7 +92,11 @@ def plan_bands(config: DetectorConfig) -> tuple[RadiusBand, ...]:
         while (level < coarsest
                and low / (1 << (level + 1)) >= config.level_min_radius_px):
             level += 1
-        target_level = min(level + config.accumulator_shrink, coarsest)
+        target_level = level
+        if config.vote_pixels_per_radius > 0.0:
+            while (target_level < coarsest
+                   and (1 << (target_level + 1)) <= low / config.vote_pixels_per_radius):
+                target_level += 1
         bands.append(RadiusBand(index, level, target_level, low, high))
     return tuple(bands)
 
@@ -114,18 +121,32 @@ def level_size(width_px: int, height_px: int, level: int) -> tuple[int, int]:
 def compute_edges(gray: np.ndarray, config: DetectorConfig) -> list[EdgeList]:
     """Edge lists of every pyramid level the config needs (index = level)."""
     bands = plan_bands(config)
-    pyramid = build_pyramid(gray, pyramid_levels(bands))
-    return [extract_edges(image, level, config.gradient_threshold, config.thin_edges)
+    pyramid = build_pyramid(gray, pyramid_levels(bands),
+                            gray_lookup(config.contrast, config.log_offset_gray))
+    return [extract_edges(image, level, config.gradient_threshold, config.thin_edges,
+                          config.edge_support)
             for level, image in enumerate(pyramid)]
 
 
-def vote_signs(polarity: str) -> tuple[float, ...]:
-    """Directions (+1 = toward the bright side, -1 = toward the dark side) that vote."""
-    return {'bright_inside': (1.0,), 'dark_inside': (-1.0,), 'both': (1.0, -1.0)}[polarity]
+def vote_signs(config: DetectorConfig, band: RadiusBand) -> tuple[float, ...]:
+    """Directions that vote for a band: +1 toward the bright side, -1 toward the dark side.
+
+    ``config.polarity`` sets them; with ``bright_inside``, bands whose smallest radius is
+    at least ``config.dark_side_min_radius_px`` (> 0) vote toward both sides: the outer
+    edge of a sign's ring against a brighter background (sky) then votes as well, which
+    pays off for signs large enough to show that edge clearly.
+    """
+    if config.polarity == 'both':
+        return (1.0, -1.0)
+    if config.polarity == 'dark_inside':
+        return (-1.0,)
+    if 0.0 < config.dark_side_min_radius_px <= band.min_radius_px:
+        return (1.0, -1.0)
+    return (1.0,)
 
 
-def vote_band(edges: EdgeList, band: RadiusBand, polarity: str,
-              frame_size: tuple[int, int]) -> np.ndarray:
+def vote_band(edges: EdgeList, band: RadiusBand, signs: tuple[float, ...],
+              frame_size: tuple[int, int], tent: bool = True) -> np.ndarray:
     """Vote image of one band: (H_target, W_target, CHANNELS) float32.
 
     ``frame_size`` is the full-resolution ``(width, height)``. Edge-level coordinates
@@ -140,17 +161,17 @@ def vote_band(edges: EdgeList, band: RadiusBand, polarity: str,
         shrink = band.shrink
         x = (edges.x_px.astype(np.float64) + 0.5) * shrink - 0.5
         y = (edges.y_px.astype(np.float64) + 0.5) * shrink - 0.5
-        for sign in vote_signs(polarity):
+        for sign in signs:
             direction_x = (sign * (edges.gx / magnitude)).astype(np.float64)
             direction_y = (sign * (edges.gy / magnitude)).astype(np.float64)
             _rasterize(accumulator, x, y, direction_x, direction_y, r0, r1, shrink,
-                       width, height)
+                       width, height, tent)
     return accumulator.reshape(height, width, CHANNELS).astype(np.float32)
 
 
 def _rasterize(accumulator: np.ndarray, px: np.ndarray, py: np.ndarray,
                dx: np.ndarray, dy: np.ndarray, r0: float, r1: float, shrink: float,
-               width: int, height: int) -> None:
+               width: int, height: int, tent: bool) -> None:
     """Add the trapezoid votes of all edges to ``accumulator`` (flat H*W*CHANNELS).
 
     ``px, py`` are in vote-image pixels, ``r0, r1`` in edge-level pixels, ``shrink`` the
@@ -191,21 +212,27 @@ def _rasterize(accumulator: np.ndarray, px: np.ndarray, py: np.ndarray,
                                       - col_starts[row_of_pixel])
     pixel_rows = rows[row_of_pixel]
     edge_of_pixel = edge_of_row[row_of_pixel]
-    distance = ((cols - px[edge_of_pixel]) * dx[edge_of_pixel]
-                + (pixel_rows - py[edge_of_pixel]) * dy[edge_of_pixel])
-    distance = np.maximum(distance / shrink, 0.5 * weight_r0)
+    offset_x = cols - px[edge_of_pixel]
+    offset_y = pixel_rows - py[edge_of_pixel]
+    along = offset_x * dx[edge_of_pixel] + offset_y * dy[edge_of_pixel]
+    if tent:
+        across = offset_x * nx[edge_of_pixel] + offset_y * ny[edge_of_pixel]
+        with np.errstate(divide='ignore', invalid='ignore'):
+            profile = np.clip(1.0 - np.abs(across) / (SPREAD * along), 0.0, 1.0)
+        profile = np.where(along > 0.0, profile, 0.0)
+    else:
+        profile = np.ones_like(along)
+    distance = np.maximum(along / shrink, 0.5 * weight_r0)
     base = (pixel_rows * width + cols) * CHANNELS
     size = accumulator.shape[0]
-    weight = 1.0 / distance
-    accumulator += np.bincount(base, weights=weight, minlength=size)
-    accumulator += np.bincount(base + 1, weights=weight * dx[edge_of_pixel], minlength=size)
-    accumulator += np.bincount(base + 2, weights=weight * dy[edge_of_pixel], minlength=size)
-    accumulator += np.bincount(base + 3, minlength=size)
+    accumulator += np.bincount(base, weights=profile / distance, minlength=size)
+    accumulator += np.bincount(base + 1, weights=profile, minlength=size)
 
 
 def vote_images(gray: np.ndarray, config: DetectorConfig) -> list[np.ndarray]:
     """Vote images of every band of a validated frame (see :func:`vote_band`)."""
     edges = compute_edges(gray, config)
     frame_size = (gray.shape[1], gray.shape[0])
-    return [vote_band(edges[band.level], band, config.polarity, frame_size)
+    tent = config.vote_profile == 'tent'
+    return [vote_band(edges[band.level], band, vote_signs(config, band), frame_size, tent)
             for band in plan_bands(config)]

@@ -49,19 +49,20 @@ def scene_spectrum(roi: np.ndarray, fft_shape: tuple[int, int], k: float) -> np.
     return kth_law(np.fft.rfft2(centred, s=fft_shape), k)
 
 
-def correlate(scene: np.ndarray, filters: np.ndarray, fft_shape: tuple[int, int]) -> np.ndarray:
-    """Correlation planes of one scene spectrum with a stack of filter spectra.
+def correlate(scene: np.ndarray, conj_filters: np.ndarray, fft_shape: tuple[int, int]
+              ) -> np.ndarray:
+    """Correlation planes of one scene spectrum with a stack of filters.
 
     Args:
         scene: (Ny, Nx // 2 + 1) complex64 scene spectrum (kth-law already applied).
-        filters: (F, Ny, Nx // 2 + 1) complex64 filter spectra.
+        conj_filters: (F, Ny, Nx // 2 + 1) complex64 CONJUGATED filter spectra
+            (``np.conj(H)``, stored so at bank build time).
         fft_shape: (Ny, Nx).
 
     Returns:
         (F, Ny, Nx) float32 correlation planes (one inverse FFT call for the batch).
     """
-    product = filters.conj()
-    product *= scene[None]
+    product = conj_filters * scene[None]
     return np.fft.irfft2(product, s=fft_shape).astype(np.float32, copy=False)
 
 
@@ -125,3 +126,38 @@ def peak_psr(planes: np.ndarray, centre_yx: tuple[int, int], search_half: int,
     std = sidelobes.std(axis=1)
     psr = (peak_value - mean) / np.maximum(std, np.float32(1e-12))
     return PeakStats(peak_value, peak_y, peak_x, psr.astype(np.float32))
+
+
+def disc_window(shape: tuple[int, int], centre_yx: tuple[float, float],
+                radius_px: float) -> np.ndarray:
+    """A disc of ones with a one-pixel linear edge, zeros outside.
+
+    Args:
+        shape: (h, w) of the window.
+        centre_yx: disc centre in pixel coordinates (pixel (i, j) has centre (i + 0.5,
+            j + 0.5)).
+        radius_px: disc radius in pixels.
+
+    Returns:
+        (h, w) float32 weights in [0, 1].
+    """
+    rows = np.arange(shape[0], dtype=np.float32)[:, None] + np.float32(0.5 - centre_yx[0])
+    cols = np.arange(shape[1], dtype=np.float32)[None, :] + np.float32(0.5 - centre_yx[1])
+    distance = np.sqrt(rows * rows + cols * cols)
+    return np.clip(np.float32(radius_px + 0.5) - distance, 0.0, 1.0)
+
+
+def keep_inside(image: np.ndarray, window: np.ndarray) -> np.ndarray:
+    """Replace what lies outside a window by the window's weighted mean.
+
+    Args:
+        image: (h, w) real image.
+        window: (h, w) weights in [0, 1] (e.g. :func:`disc_window`).
+
+    Returns:
+        (h, w) float32: ``image`` inside, its mean there outside, blended at the edge.
+    """
+    image = np.asarray(image, dtype=np.float32)
+    total = float(window.sum())
+    mean = float((image * window).sum()) / total if total > 0 else float(image.mean())
+    return image * window + np.float32(mean) * (1.0 - window)

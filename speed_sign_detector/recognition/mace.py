@@ -74,5 +74,6 @@ def mace_filter(spectra: np.ndarray, fft_shape: tuple[int, int], noise_tradeoff:
     gram = np.einsum('ik,jk->ij', stacked, stacked).astype(np.float64)
     gram += np.eye(count) * ridge * np.trace(gram) / count
     coefficients = np.linalg.solve(gram, np.ones(count)).astype(np.float32)
-    filter_flat = (coefficients @ flat) / power
+    # times Ny * Nx: the inverse FFT divides by it, so a training image peaks at 1
+    filter_flat = (coefficients @ flat) * np.float32(fft_shape[0] * fft_shape[1]) / power
     return filter_flat.reshape(spectra.shape[1:]).astype(np.complex64)

@@ -219,10 +219,6 @@ class _Canvas:
         self.bgr = blended.astype(np.uint8)
 
 
-def _limit_text(kind: str) -> str:
-    return kind
-
-
 def _draw_ring_sign(canvas: _Canvas, geometry: SignGeometry) -> None:
     canvas.disc(1.0, geometry.white_bgr, alpha=True)
     canvas.disc(geometry.ring_outer, geometry.red_bgr)
@@ -270,7 +266,9 @@ def _car_outline(cx: float, cy: float, width: float) -> np.ndarray:
     return np.stack([cx + arr[:, 0] * width, cy + (arr[:, 1] - 0.4) * h], axis=1)
 
 
-def _arrowhead(tip: tuple[float, float], direction: tuple[float, float], size: float) -> np.ndarray:
+def _arrowhead(tip: tuple[float, float], direction: tuple[float, float],
+               size: float) -> np.ndarray:
+    """Filled triangle (3, 2) with its tip at ``tip`` pointing along ``direction``."""
     d = np.asarray(direction, dtype=np.float64)
     n = np.array([-d[1], d[0]])
     t = np.asarray(tip, dtype=np.float64)
@@ -289,7 +287,7 @@ def _draw_lookalike(canvas: _Canvas, kind: str, geometry: SignGeometry) -> None:
         canvas.polygon(_car_outline(-0.3, 0.05, 0.5), geometry.red_bgr)
         canvas.polygon(_car_outline(0.3, 0.05, 0.5), geometry.black_bgr)
         return
-    small = dict(height=0.46, digit_width=0.52, stroke=0.15, gap=0.08)
+    small = {'height': 0.46, 'digit_width': 0.52, 'stroke': 0.15, 'gap': 0.08}
     if kind == 'weight_limit':
         lines, stroke_w = _text_strokes('7,5t', **small)
         canvas.polylines(lines, stroke_w, geometry.black_bgr)
@@ -298,13 +296,15 @@ def _draw_lookalike(canvas: _Canvas, kind: str, geometry: SignGeometry) -> None:
         lines, stroke_w = _text_strokes('2m', **small)
         canvas.polylines(lines, stroke_w, geometry.black_bgr)
         for sign in (-1.0, 1.0):
-            canvas.polygon(_arrowhead((sign * 0.42, 0.0), (sign * -1.0, 0.0), 0.2), geometry.black_bgr)
+            canvas.polygon(_arrowhead((sign * 0.42, 0.0), (sign * -1.0, 0.0), 0.2),
+                           geometry.black_bgr)
         return
     if kind == 'height_limit':
         lines, stroke_w = _text_strokes('3,8m', **small)
         canvas.polylines(lines, stroke_w, geometry.black_bgr)
         for sign in (-1.0, 1.0):
-            canvas.polygon(_arrowhead((0.0, sign * 0.42), (0.0, sign * -1.0), 0.2), geometry.black_bgr)
+            canvas.polygon(_arrowhead((0.0, sign * 0.42), (0.0, sign * -1.0), 0.2),
+                           geometry.black_bgr)
         return
     raise ValueError(f'unknown look-alike kind {kind!r}')
 
@@ -356,7 +356,7 @@ def render_sign_highres(kind: str, size_px: int,
         _draw_lookalike(canvas, kind, geometry)
     elif kind in GENERIC_KINDS or kind.isdigit():
         _draw_ring_sign(canvas, geometry)
-        _draw_number(canvas, _limit_text(kind), geometry, geometry.black_bgr)
+        _draw_number(canvas, kind, geometry, geometry.black_bgr)
     else:
         raise ValueError(f'unknown sign kind {kind!r}')
     alpha = canvas.alpha.astype(np.float32) / 255.0

@@ -13,6 +13,9 @@ Example::
   ``/candidates`` (PointCloud2, every frame), ``/speed_limit`` (UInt16, transient local,
   on the first frame and whenever the active limit changes, like the node), and with
   ``--debug-images`` ``/debug_image`` (bgr8).
+- ``--contact-sheet PNG``: a picture of annotated frames (detections, labels, the
+  active limit): every frame where a limit was recognized, filled up with evenly
+  spaced frames (at most :data:`CONTACT_SHEET_FRAMES`).
 - ``--truth``: per-sign metrics against a truth file (:mod:`speed_sign_detector.truth`):
 
   ``signs``
@@ -29,6 +32,10 @@ Example::
       ``phantom_limits`` (no sign in view).
   ``false_limits_per_hour``
       wrong_limits per hour of drive time (stamps of the processed frames).
+  ``end_of_limit_signs``, ``end_of_limit_recognized``, ``wrong_end_of_limits``
+      end-of-limit signs in the truth (kind ``end_of_limit...``), those the pipeline
+      recognized as end of limit, and end-of-limit recognitions with no such sign in
+      view (each wrongly cancels the active limit).
   ``fps``, ``latency_ms_p50``, ``latency_ms_p95``
       frames per second over the whole run (reading, decoding, pipeline, writing) and
       per-frame processing time (image conversion + pipeline), milliseconds.
@@ -40,6 +47,7 @@ written to ``--out``.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import sys
@@ -53,11 +61,16 @@ import numpy as np
 
 from speed_sign_detector.bag_io import BagReader, BagWriter, header_stamp_ns
 from speed_sign_detector.config import PipelineConfig, load_yaml
-from speed_sign_detector.errors import ImageConversionError, SpeedSignError
+from speed_sign_detector.errors import BagError, ImageConversionError, SpeedSignError
+from speed_sign_detector.recognition.classifier import LABEL_END_OF_LIMIT
 from speed_sign_detector.truth import TruthTrack, group_tracks, read_truth
 
+#: Truth kinds of end-of-limit signs start with this.
+END_OF_LIMIT_PREFIX = 'end_of_limit'
 #: Default grace after a sign left the image within which recognizing it still counts, s.
 DEFAULT_GRACE_S = 1.0
+#: Most frames on a contact sheet.
+CONTACT_SHEET_FRAMES = 12
 OUTPUT_TOPICS = {'candidates': '/candidates', 'speed_limit': '/speed_limit',
                  'debug_image': '/debug_image'}
 
@@ -68,7 +81,7 @@ class LimitEvent:
 
     Attributes:
         stamp_s: frame time, seconds.
-        limit_kmh: the recognized value.
+        limit_kmh: the recognized value; 0 for an end-of-limit sign.
         x_px, y_px: where the recognizing track was (NaN when unknown).
         track_id: the pipeline's track id (-1 when unknown).
     """
@@ -108,6 +121,9 @@ class DriveScore:
     misread_limits: int
     phantom_limits: int
     false_limits_per_hour: float
+    end_of_limit_signs: int
+    end_of_limit_recognized: int
+    wrong_end_of_limits: int
     outcomes: tuple[SignOutcome, ...]
 
 
@@ -118,7 +134,8 @@ def score_drive(tracks: Sequence[TruthTrack], events: Sequence[LimitEvent],
 
     Args:
         tracks: truth tracks (:func:`speed_sign_detector.truth.group_tracks`).
-        events: limits the pipeline newly recognized, in time order.
+        events: limits (and end-of-limit signs, ``limit_kmh`` 0) the pipeline newly
+            recognized, in time order.
         frame_stamps_s: stamps of the processed frames, seconds (ascending); truth signs
             that first appear after the last processed frame are not counted.
         grace_s: a recognition up to this long after a sign's last visible frame counts.
@@ -135,11 +152,22 @@ def score_drive(tracks: Sequence[TruthTrack], events: Sequence[LimitEvent],
     outcomes = {track.track_id: SignOutcome(
         track.track_id, track.kind, track.limit_kmh, track.first_stamp_s - first_stamp,
         track.last_stamp_s - first_stamp, track.max_radius_px) for track in seen}
-    lookalike = misread = phantom = 0
+    lookalike = misread = phantom = wrong_ends = 0
     for event in events:
         in_view = [track for track in seen
                    if track.first_stamp_s - tolerance_s <= event.stamp_s
                    <= track.last_stamp_s + grace_s]
+        if event.limit_kmh == 0:
+            ends = [track for track in in_view if _is_end_of_limit(track)]
+            if ends:
+                best = min(ends, key=lambda track: _distance_px(track, event))
+                outcomes[best.track_id].recognized = True
+            else:
+                wrong_ends += 1
+                if in_view:
+                    nearest = min(in_view, key=lambda track: _distance_px(track, event))
+                    outcomes[nearest.track_id].wrong_values.append(0)
+            continue
         matches = [track for track in in_view if track.limit_kmh == event.limit_kmh]
         if matches:
             best = min(matches, key=lambda track: (_distance_px(track, event),
@@ -163,6 +191,8 @@ def score_drive(tracks: Sequence[TruthTrack], events: Sequence[LimitEvent],
         else:
             phantom += 1
     limit_outcomes = [outcome for outcome in outcomes.values() if outcome.limit_kmh > 0]
+    end_outcomes = [outcome for outcome in outcomes.values()
+                    if outcome.kind.startswith(END_OF_LIMIT_PREFIX)]
     recognized = sum(outcome.recognized for outcome in limit_outcomes)
     wrong = lookalike + misread + phantom
     duration_h = max((last_stamp - first_stamp + period_s) / 3600.0, 1e-9) \
@@ -172,7 +202,14 @@ def score_drive(tracks: Sequence[TruthTrack], events: Sequence[LimitEvent],
         recall=recognized / len(limit_outcomes) if limit_outcomes else None,
         wrong_limits=wrong, lookalike_limits=lookalike, misread_limits=misread,
         phantom_limits=phantom, false_limits_per_hour=wrong / duration_h,
+        end_of_limit_signs=len(end_outcomes),
+        end_of_limit_recognized=sum(outcome.recognized for outcome in end_outcomes),
+        wrong_end_of_limits=wrong_ends,
         outcomes=tuple(sorted(outcomes.values(), key=lambda outcome: outcome.first_s)))
+
+
+def _is_end_of_limit(track: TruthTrack) -> bool:
+    return track.kind.startswith(END_OF_LIMIT_PREFIX)
 
 
 def _nearest_row(track: TruthTrack, stamp_s: float) -> Any:
@@ -191,15 +228,17 @@ def new_limit_events(result: Any, recognized_track_ids: set[int]) -> list[LimitE
     """Limits newly recognized in one :class:`FrameResult` (updates ``recognized_track_ids``).
 
     A track of the pipeline recognizes its label once; each newly recognized track with a
-    numeric label is an event at the track's position. A ``recognized_limit_kmh`` without
+    numeric label is an event at the track's position, one labelled end of limit an event
+    with ``limit_kmh`` 0. A ``recognized_limit_kmh`` without
     such a track (should not happen) is still an event, without position.
     """
     events = []
     for track in result.tracks:
         if track.recognized and track.track_id not in recognized_track_ids:
             recognized_track_ids.add(track.track_id)
-            if track.label.isdigit():
-                events.append(LimitEvent(result.stamp_s, int(track.label), track.x_px,
+            if track.label.isdigit() or track.label == LABEL_END_OF_LIMIT:
+                limit_kmh = int(track.label) if track.label.isdigit() else 0
+                events.append(LimitEvent(result.stamp_s, limit_kmh, track.x_px,
                                          track.y_px, track.track_id))
     if result.recognized_limit_kmh and not any(
             event.limit_kmh == result.recognized_limit_kmh for event in events):
@@ -266,10 +305,50 @@ class _ResultWriter:
         self.writer.close()
 
 
+class _ContactSheet:
+    """Collects annotated frames: those with a recognition, and evenly spaced others."""
+
+    def __init__(self, path: Path, total_frames: int) -> None:
+        self.path = path
+        self.stride = max(1, total_frames // (CONTACT_SHEET_FRAMES // 2 or 1))
+        self.event_frames: list[tuple[int, np.ndarray]] = []
+        self.spaced_frames: list[tuple[int, np.ndarray]] = []
+
+    def offer(self, index: int, gray: np.ndarray, result: Any, has_event: bool) -> None:
+        from speed_sign_detector.visualization import draw_frame_result
+
+        if has_event and len(self.event_frames) < CONTACT_SHEET_FRAMES:
+            self.event_frames.append((index, draw_frame_result(gray, result)))
+        elif index % self.stride == self.stride // 2:
+            self.spaced_frames.append((index, draw_frame_result(gray, result)))
+
+    def write(self) -> None:
+        import cv2
+
+        from speed_sign_detector.visualization import contact_sheet
+
+        room = max(0, CONTACT_SHEET_FRAMES - len(self.event_frames))
+        spaced = self.spaced_frames
+        if len(spaced) > room:
+            picks = np.linspace(0, len(spaced) - 1, room).round().astype(int) if room else []
+            spaced = [spaced[pick] for pick in picks]
+        frames = sorted(self.event_frames + spaced, key=lambda item: item[0])
+        if not frames:
+            return
+        try:
+            ok = cv2.imwrite(str(self.path), contact_sheet([image for _, image in frames]))
+        except cv2.error as err:
+            raise BagError(f'cannot write contact sheet {self.path}: {err}') from err
+        if not ok:
+            raise BagError(f'cannot write contact sheet {self.path} (is it a .png path in a '
+                           f'writable folder?)')
+
+
 def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | None = None,
                  out_path: Path | None = None, debug_images: bool = False,
                  config: PipelineConfig | None = None, grace_s: float = DEFAULT_GRACE_S,
-                 progress: bool = True) -> tuple[dict[str, Any], SpeedSignError | None]:
+                 progress: bool = True, contact_sheet_path: Path | None = None
+                 ) -> tuple[dict[str, Any], SpeedSignError | None]:
     """Run a bag through the pipeline; returns (summary, error that cut the run short).
 
     The summary is complete for the frames processed before an error; errors that stop
@@ -291,6 +370,8 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
     with BagReader(bag_path) as bag:
         image_topic = bag.image_topic(topic)
         writer = _ResultWriter(out_path, debug_images) if out_path is not None else None
+        sheet = (_ContactSheet(contact_sheet_path, image_topic.count)
+                 if contact_sheet_path is not None else None)
         bar = _Progress(image_topic.count if progress else 0)
         bar.enabled = bar.enabled and progress
         started = time.perf_counter()
@@ -314,7 +395,10 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
                             f'processed: {err}') from err
                     latencies_ms.append((time.perf_counter() - begin) * 1e3)
                     stamps_s.append(stamp_ns * 1e-9)
-                    events.extend(new_limit_events(result, recognized_ids))
+                    new_events = new_limit_events(result, recognized_ids)
+                    events.extend(new_events)
+                    if sheet is not None:
+                        sheet.offer(len(stamps_s) - 1, gray, result, bool(new_events))
                     if result.active_limit_kmh != active_limit:
                         active_limit = result.active_limit_kmh
                         limit_changes.append((stamp_ns * 1e-9, active_limit))
@@ -330,6 +414,8 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
                 bar.finish()
                 if writer is not None:
                     writer.close()
+                if sheet is not None:
+                    sheet.write()
         finally:
             pipeline.close()
         elapsed_s = time.perf_counter() - started
@@ -339,7 +425,7 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
     summary: dict[str, Any] = {
         'bag': str(bag_path), 'topic': image_topic.name, 'msgtype': image_topic.msgtype,
         'frames': frames,
-        'duration_s': (stamps_s[-1] - stamps_s[0]) if frames > 1 else 0.0,
+        'duration_s': round(stamps_s[-1] - stamps_s[0], 6) if frames > 1 else 0.0,
         'backend': backend, 'renderer': renderer,
         'fps': frames / loop_s if loop_s > 0 else 0.0,
         'latency_ms_p50': float(np.percentile(latencies_ms, 50)) if latencies_ms else None,
@@ -351,6 +437,7 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
                          for e in events],
         'final_limit_kmh': limit_changes[-1][1] if limit_changes else 0,
         'out_bag': str(out_path) if out_path is not None else None,
+        'contact_sheet': str(contact_sheet_path) if contact_sheet_path is not None else None,
         'truncated': stopped_by is not None or salvage_reason is not None,
         'error': str(stopped_by) if stopped_by is not None else None,
     }
@@ -362,6 +449,9 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
             'wrong_limits': score.wrong_limits, 'lookalike_limits': score.lookalike_limits,
             'misread_limits': score.misread_limits, 'phantom_limits': score.phantom_limits,
             'false_limits_per_hour': score.false_limits_per_hour,
+            'end_of_limit_signs': score.end_of_limit_signs,
+            'end_of_limit_recognized': score.end_of_limit_recognized,
+            'wrong_end_of_limits': score.wrong_end_of_limits,
             'per_sign': [asdict(outcome) for outcome in score.outcomes],
         })
     return summary, stopped_by
@@ -376,13 +466,16 @@ def format_report(summary: dict[str, Any]) -> str:
         for row in summary['per_sign']:
             if row['limit_kmh'] > 0:
                 result = 'recognized' if row['recognized'] else 'MISSED'
+            elif row['kind'].startswith(END_OF_LIMIT_PREFIX):
+                result = 'end read' if row['recognized'] else 'end missed'
             else:
                 result = 'look-alike'
             after = (f'{row["recognized_after_s"]:7.2f}'
                      if row['recognized_after_s'] is not None else f'{"-":>7}')
             radius = (f'{row["radius_at_recognition_px"]:5.1f}'
                       if row['radius_at_recognition_px'] is not None else f'{"-":>5}')
-            wrong = ','.join(str(value) for value in row['wrong_values']) or '-'
+            wrong = ','.join(str(value) if value else 'end'
+                             for value in row['wrong_values']) or '-'
             lines.append(f'{row["track_id"]:>5} {row["kind"]:<22} {row["limit_kmh"]:>5} '
                          f'{row["first_s"]:7.2f} {row["last_s"]:7.2f} '
                          f'{row["max_radius_px"]:6.1f} {result:<10} {after} {radius}  {wrong}')
@@ -395,16 +488,21 @@ def format_report(summary: dict[str, Any]) -> str:
                      f'{summary["lookalike_limits"]}, misread {summary["misread_limits"]}, '
                      f'phantom {summary["phantom_limits"]}), '
                      f'{summary["false_limits_per_hour"]:.1f} per hour')
+        lines.append(f'end-of-limit signs {summary["end_of_limit_signs"]}, read '
+                     f'{summary["end_of_limit_recognized"]}, wrong end-of-limit '
+                     f'{summary["wrong_end_of_limits"]}')
     p50, p95 = summary['latency_ms_p50'], summary['latency_ms_p95']
     lines.append(f'{summary["frames"]} frames of {summary["topic"]} ({summary["msgtype"]}), '
                  f'{summary["duration_s"]:.1f} s of drive; {summary["fps"]:.1f} fps, latency '
                  + (f'p50 {p50:.1f} ms, p95 {p95:.1f} ms' if p50 is not None else 'n/a')
                  + f'; backend {summary["backend"]} ({summary["renderer"]})')
-    limits = ', '.join(f'{event["limit_kmh"]} at {event["stamp_s"]:.2f}'
+    limits = ', '.join(f'{event["limit_kmh"] or "end"} at {event["stamp_s"]:.2f}'
                        for event in summary['limit_events']) or 'none'
     lines.append(f'limits recognized: {limits}')
     if summary['out_bag']:
         lines.append(f'results written to {summary["out_bag"]}')
+    if summary.get('contact_sheet'):
+        lines.append(f'contact sheet written to {summary["contact_sheet"]}')
     if summary['error']:
         lines.append(f'STOPPED EARLY: {summary["error"]}')
     return '\n'.join(lines)
@@ -414,7 +512,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``bag`` subcommand to ``speed_sign_eval``."""
     parser = subparsers.add_parser(
         'bag', help='run a recorded drive (ROS 2 MCAP/sqlite3 or ROS 1 bag) through the '
-        'pipeline', description=__doc__.split('\n\n')[0] if __doc__ else None)
+        'pipeline', description='Run the image topic of a bag through the pipeline as fast '
+        'as possible; with --truth, per-sign metrics (recall, wrong limits, false limits '
+        'per hour); with --out, a ROS 2 MCAP bag of the node\'s outputs.')
     parser.add_argument('bag', type=Path, help='ROS 2 bag directory, .mcap/.db3 file, or '
                         'ROS 1 .bag file')
     parser.add_argument('--topic', help='image topic (needed when the bag has several)')
@@ -423,6 +523,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         'MCAP bag')
     parser.add_argument('--debug-images', action='store_true',
                         help='with --out, also write /debug_image')
+    parser.add_argument('--contact-sheet', type=Path, metavar='PNG',
+                        help='write annotated frames (recognitions and evenly spaced others) '
+                        'as one picture')
     parser.add_argument('--config', type=Path, help='parameter YAML file of the node')
     parser.add_argument('--backend', choices=('auto', 'gl', 'numpy'),
                         help='voting backend (overrides --config)')
@@ -438,14 +541,13 @@ def run(args: argparse.Namespace) -> int:
     """Execute ``speed_sign_eval bag``; returns the exit status."""
     config = load_yaml(args.config) if args.config is not None else PipelineConfig()
     if args.backend is not None:
-        config = PipelineConfig(**{**{name: getattr(config, name) for name in
-                                      ('classify', 'detector', 'classifier', 'tracker')},
-                                   'backend': args.backend})
+        config = dataclasses.replace(config, backend=args.backend)
     if args.debug_images and args.out is None:
         print('speed_sign_eval bag: --debug-images has no effect without --out',
               file=sys.stderr)
     summary, stopped_by = evaluate_bag(args.bag, args.topic, args.truth, args.out,
-                                       args.debug_images, config, args.grace)
+                                       args.debug_images, config, args.grace,
+                                       contact_sheet_path=args.contact_sheet)
     if args.json:
         print(json.dumps(summary, default=_json_default))
     else:

@@ -90,13 +90,19 @@ class MonitorSnapshot:
 
         limit = ('none' if self.active_limit_kmh == 0 else
                  show(self.active_limit_kmh, '{} km/h'))
+        if isinstance(self.latency_p50_ms, (int, float)) and self.latency_p50_ms > 60_000:
+            stamp_latency = 'old stamps'   # a replayed bag without --restamp
+        else:
+            stamp_latency = (f'p50 {show(self.latency_p50_ms, "{:.0f}")} p95 '
+                             f'{show(self.latency_p95_ms, "{:.0f}")} ms')
         return (f'limit {limit} | candidates {show(self.candidates_per_frame)}'
                 f' (mean {show(self.candidates_per_frame_mean, "{:.1f}")}) | '
-                f'fps {show(self.fps, "{:.1f}")} | latency p50 '
-                f'{show(self.latency_p50_ms, "{:.0f}")} p95 '
-                f'{show(self.latency_p95_ms, "{:.0f}")} ms | processed '
-                f'{show(self.frames_processed)} dropped {show(self.frames_dropped)} | '
-                f'{show(self.backend)} {show(self.status_level)}')
+                f'fps {show(self.fps, "{:.1f}")} | processing p50 '
+                f'{show(self.processing_latency_p50_ms, "{:.0f}")} p95 '
+                f'{show(self.processing_latency_p95_ms, "{:.0f}")} ms | stamp latency '
+                f'{stamp_latency} | processed {show(self.frames_processed)} dropped '
+                f'{show(self.frames_dropped)} | {show(self.backend)} '
+                f'{show(self.status_level)}')
 
 
 class _Monitor:

@@ -1,0 +1,235 @@
+#!/usr/bin/env python3
+"""Classifier-stage benchmark: speed, bank memory, and a plain NCC baseline.
+
+Prints (stderr, and with ``--json`` one JSON object as the last stdout line):
+
+- filter-bank build time (``cache_dir`` "", so really built) and memory of the
+  spectra; peak resident memory growth of the process while building;
+- time per candidate and per 640x480 frame holding 7 rendered signs (7 candidates),
+  median of ``--frames`` frames, in this process (no other load is controlled for);
+- with ``--data``: on GTSRB-format crops, the accuracy of (a) the classifier and (b) a
+  plain ``cv2.matchTemplate`` normalised cross-correlation baseline with the SAME
+  rendered gray templates (best template over scales 0.85..1.15 and +-3 px shifts), and
+  the mean NCC of each class's rendered template with its real crops (how well the
+  rendering resembles real signs; crop ROI resized to the template, best of +-3 px).
+
+Usage::
+
+    python bench/bench_classifier.py [--frames 20] [--data ../shared/data/gtsrb-dev]
+        [--every 4] [--json]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import statistics
+import sys
+import time
+from collections import Counter, defaultdict
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from speed_sign_detector.config import ClassifierConfig
+from speed_sign_detector.detection.candidates import Candidate
+from speed_sign_detector.recognition.classifier import CLASS_TEMPLATES, Classifier
+from speed_sign_detector.recognition.templates import (
+    GRAY_TEMPLATE_GEOMETRY,
+    gray_views,
+    render_sign,
+)
+from speed_sign_detector.tools.eval_crops import (
+    GTSRB_END_OF_80,
+    GTSRB_LIMITS_KMH,
+    read_labels,
+    size_bin,
+    truth_name,
+)
+
+FRAME_SHAPE = (480, 640)
+FRAME_KINDS = ('30', '50', '80', '100', '120', 'no_overtaking', 'end_of_limit_60')
+
+
+def _rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def synthetic_frame(seed: int) -> tuple[np.ndarray, list[Candidate]]:
+    """640x480 gray frame with 7 signs, and their candidates (centre error ~1 px, radius
+    error -10..+15%). Radii are log-uniform in 6..37 px, the range of GTSDB signs."""
+    rng = np.random.default_rng(seed)
+    coarse = rng.uniform(40, 200, (FRAME_SHAPE[0] // 20, FRAME_SHAPE[1] // 20))
+    frame = cv2.resize(coarse.astype(np.float32), FRAME_SHAPE[::-1],
+                       interpolation=cv2.INTER_CUBIC)
+    candidates = []
+    for index, kind in enumerate(FRAME_KINDS):
+        radius = float(np.exp(rng.uniform(np.log(6.0), np.log(37.0))))
+        size = int(round(2 * radius))
+        bgr, alpha = render_sign(kind, size)
+        sign = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype(np.float32)
+        x0 = 10 + index * 88 + int(rng.integers(0, 88 - min(size, 80) + 1))
+        y0 = int(rng.integers(10, FRAME_SHAPE[0] - size - 10))
+        x0 = min(x0, FRAME_SHAPE[1] - size - 1)
+        patch = frame[y0:y0 + size, x0:x0 + size]
+        frame[y0:y0 + size, x0:x0 + size] = sign + (1.0 - alpha) * patch
+        candidates.append(Candidate(x0 + radius + rng.normal(0, 1), y0 + radius +
+                                    rng.normal(0, 1), radius * rng.uniform(0.9, 1.15), 1.0))
+    frame += rng.normal(0, 4, frame.shape)
+    return np.clip(frame, 0, 255).astype(np.uint8), candidates
+
+
+def bench_speed(classifier: Classifier, frames: int) -> dict[str, float]:
+    """Median wall-clock ms per frame of 7 candidates and per candidate, and the
+    process CPU time (less sensitive to other processes on a shared machine)."""
+    per_frame = []
+    cpu_ms = 0.0
+    for seed in range(frames):
+        gray, candidates = synthetic_frame(seed)
+        start, cpu_start = time.perf_counter(), time.process_time()
+        classifier.classify(gray, candidates)
+        cpu_ms += (time.process_time() - cpu_start) * 1000.0
+        per_frame.append((time.perf_counter() - start) * 1000.0)
+    median = statistics.median(per_frame)
+    return {'ms_per_frame_7_candidates': median, 'ms_per_candidate': median / 7.0,
+            'ms_per_frame_best': min(per_frame),
+            'cpu_ms_per_candidate': cpu_ms / (7.0 * frames)}
+
+
+def _crop_window(crop: np.ndarray, box: tuple[int, int, int, int], size: int, pad: int
+                 ) -> np.ndarray:
+    """The sign box of a crop resized to ``size`` with ``pad`` px of context, float32."""
+    x1, y1, x2, y2 = box
+    sx, sy = size / (x2 - x1 + 1), size / (y2 - y1 + 1)
+    matrix = np.float32([[sx, 0, pad - x1 * sx], [0, sy, pad - y1 * sy]])
+    return cv2.warpAffine(crop, matrix, (size + 2 * pad, size + 2 * pad),
+                          flags=cv2.INTER_AREA if sx < 1 else cv2.INTER_LINEAR,
+                          borderMode=cv2.BORDER_REPLICATE).astype(np.float32)
+
+
+def _bin_low(name: str) -> int:
+    """Lower bound (px) of a size-bin name such as '20-25' or '70+'."""
+    return int(name.split('-')[0].rstrip('+'))
+
+
+def bench_crops(classifier: Classifier, folder: Path, every: int) -> dict[str, object]:
+    """Classifier vs NCC baseline accuracy, and rendering-vs-real NCC, on crops."""
+    labels, _ = read_labels(folder)
+    labels = labels[::max(1, every)]
+    size = 32
+    kinds = {name: kinds[0] if len(kinds) == 1 else 'end_of_limit_80'
+             for name, kinds in CLASS_TEMPLATES.items()}
+    templates = {name: gray_views(kind, size, size + 2, [(0, 0, 0)],
+                                  geometry=GRAY_TEMPLATE_GEOMETRY)[0]
+                 for name, kind in kinds.items()}
+    render_ncc: dict[str, list[float]] = defaultdict(list)
+    right = Counter()
+    ncc_right = Counter()
+    size_count: Counter[str] = Counter()
+    size_right: Counter[str] = Counter()
+    size_ncc_right: Counter[str] = Counter()
+    count = Counter()
+    ncc_ms = 0.0
+    clf_ms = 0.0
+    for label in labels:
+        crop = cv2.imread(str(label.path), cv2.IMREAD_GRAYSCALE)
+        truth = truth_name(label.class_id)
+        box = (label.roi_x1, label.roi_y1, label.roi_x2, label.roi_y2)
+        # rendering vs real: the class's own template on the crop's sign box
+        window = _crop_window(crop, box, size, 4)
+        own = templates[truth if truth != 'end_of_limit' else 'end_of_limit']
+        render_ncc[truth].append(float(cv2.matchTemplate(window, own,
+                                                         cv2.TM_CCOEFF_NORMED).max()))
+        # NCC baseline: no box known, same framing guess as classify_crop, scale search
+        start = time.perf_counter()
+        height, width = crop.shape
+        side = float(min(height, width))
+        sign = min(side / 1.2, side - 10.0) if side > 10 else side / 1.2
+        best_name, best_score = '', -2.0
+        for scale in (0.85, 0.92, 1.0, 1.08, 1.15):
+            factor = size / (sign * scale)
+            resized = cv2.resize(crop, None, fx=factor, fy=factor,
+                                 interpolation=cv2.INTER_AREA if factor < 1 else
+                                 cv2.INTER_LINEAR).astype(np.float32)
+            cy, cx = resized.shape[0] / 2.0, resized.shape[1] / 2.0
+            half = (size + 2) // 2 + 3
+            padded = cv2.copyMakeBorder(resized, half, half, half, half, cv2.BORDER_REPLICATE)
+            top, left = int(round(cy)), int(round(cx))
+            search = padded[top:top + 2 * half, left:left + 2 * half]
+            for name, template in templates.items():
+                score = float(cv2.matchTemplate(search, template, cv2.TM_CCOEFF_NORMED).max())
+                if score > best_score:
+                    best_name, best_score = name, score
+        ncc_ms += time.perf_counter() - start
+        start = time.perf_counter()
+        answer = classifier.classify_crop(crop)
+        clf_ms += time.perf_counter() - start
+        is_end = label.class_id == GTSRB_END_OF_80
+        count[truth] += 1
+        bin_name = size_bin(label.roi_x2 - label.roi_x1 + 1)
+        size_count[bin_name] += 1
+        size_right[bin_name] += (not answer.is_limit) if is_end else answer.label == truth
+        size_ncc_right[bin_name] += (not best_name.isdigit()) if is_end else best_name == truth
+        right[truth] += (not answer.is_limit) if is_end else answer.label == truth
+        ncc_right[truth] += (not best_name.isdigit()) if is_end else best_name == truth
+    total = sum(count.values())
+    order = [truth_name(c) for c in sorted(set(GTSRB_LIMITS_KMH) | {GTSRB_END_OF_80})]
+    return {
+        'crops': total,
+        'classifier_accuracy': sum(right.values()) / total,
+        'classifier_per_class': {k: right[k] / count[k] for k in order if count[k]},
+        'classifier_ms_per_crop': 1000.0 * clf_ms / total,
+        'ncc_baseline_accuracy': sum(ncc_right.values()) / total,
+        'ncc_baseline_per_class': {k: ncc_right[k] / count[k] for k in order if count[k]},
+        'ncc_baseline_ms_per_crop': 1000.0 * ncc_ms / total,
+        # by sign width (ROI, px), bins of speed_sign_eval crops; dicts keep bin order
+        'count_by_size_px': {b: size_count[b] for b in sorted(size_count, key=_bin_low)},
+        'classifier_by_size_px': {b: size_right[b] / size_count[b]
+                                  for b in sorted(size_count, key=_bin_low)},
+        'ncc_baseline_by_size_px': {b: size_ncc_right[b] / size_count[b]
+                                    for b in sorted(size_count, key=_bin_low)},
+        'rendering_vs_real_mean_ncc': {k: float(np.mean(render_ncc[k])) for k in order
+                                       if render_ncc[k]},
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--frames', type=int, default=20, help='synthetic frames timed')
+    parser.add_argument('--data', type=Path, help='GTSRB-format folder (labels.csv)')
+    parser.add_argument('--every', type=int, default=4, help='use every Nth crop')
+    parser.add_argument('--json', action='store_true', help='JSON object as last stdout line')
+    args = parser.parse_args(argv)
+
+    rss_before = _rss_mb()
+    start = time.perf_counter()
+    classifier = Classifier(ClassifierConfig(cache_dir=''))
+    build_s = time.perf_counter() - start
+    result: dict[str, object] = {
+        'bank_build_s': build_s,
+        'bank_sizes': len(classifier.banks),
+        'bank_filters': sum(b.classification.shape[0] + b.detection.shape[0]
+                            for b in classifier.banks),
+        'bank_mb': classifier.bank_nbytes / 1e6,
+        'rss_growth_mb': _rss_mb() - rss_before,
+    }
+    print(f"banks: {result['bank_sizes']} sizes, {result['bank_filters']} filters, "
+          f"{result['bank_mb']:.1f} MB, built in {build_s:.2f} s", file=sys.stderr)
+    result.update(bench_speed(classifier, args.frames))
+    print(f"speed: {result['ms_per_candidate']:.2f} ms/candidate, "
+          f"{result['ms_per_frame_7_candidates']:.1f} ms/frame (7 candidates), CPU "
+          f"{result['cpu_ms_per_candidate']:.2f} ms/candidate", file=sys.stderr)
+    if args.data:
+        crops = bench_crops(classifier, args.data, args.every)
+        result.update(crops)
+        print(f"crops {crops['crops']}: classifier {crops['classifier_accuracy']:.3f}, "
+              f"NCC baseline {crops['ncc_baseline_accuracy']:.3f}; rendering vs real NCC "
+              f"{crops['rendering_vs_real_mean_ncc']}", file=sys.stderr)
+    if args.json:
+        print(json.dumps(result))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,103 @@
+#!/usr/bin/env python3
+"""cProfile of the stages that run_all.py finds slower than a peer.
+
+Profiles, on the frames/crops run_all.py uses, the detector (``--backend gl`` or
+``numpy``) at one frame size, and ``Classifier.classify_crop`` on GTSRB crops, and prints
+the functions with the most own time (``tottime``) and cumulative time. With the GL
+backend on llvmpipe the GL calls (``render``, ``read``, ``finish``) are where the CPU
+rasterizer runs; on a real GPU they would mostly wait for it.
+
+Usage::
+
+    python bench/profile_stages.py detector [--backend gl] [--size 816x480] [--frames 8]
+    python bench/profile_stages.py classifier [--crops 200]
+"""
+from __future__ import annotations
+
+import argparse
+import cProfile
+import pstats
+import sys
+from pathlib import Path
+
+import cv2
+
+BENCH_DIR = Path(__file__).resolve().parent
+if str(BENCH_DIR) not in sys.path:
+    sys.path.insert(0, str(BENCH_DIR))
+
+import bench_classifier  # noqa: E402,F401  (run_all imports it too)
+import run_all  # noqa: E402
+
+from speed_sign_detector.config import DetectorConfig  # noqa: E402
+from speed_sign_detector.detection.detector import Detector  # noqa: E402
+from speed_sign_detector.recognition.classifier import Classifier  # noqa: E402
+from speed_sign_detector.tools.eval_crops import read_labels  # noqa: E402
+from speed_sign_detector.tools.eval_scenes import read_gtsdb_truth  # noqa: E402
+
+
+def _print(profile: cProfile.Profile, lines: int) -> None:
+    stats = pstats.Stats(profile, stream=sys.stdout).strip_dirs()
+    stats.sort_stats('tottime').print_stats(lines)
+    stats.sort_stats('cumulative').print_stats(lines)
+
+
+def profile_detector(backend: str, size_name: str, frames: int, lines: int) -> None:
+    """Profile ``Detector.detect`` on ``frames`` of run_all's GTSDB frames."""
+    size = next(s for s in run_all.DETECTOR_SIZES if s[0] == size_name)
+    folder = run_all.DATA_DIR / 'gtsdb-dev'
+    truth = read_gtsdb_truth(folder / 'gt.txt')
+    files = run_all._spaced(sorted(n for n, signs in truth.items()
+                                   if any(s.limit_kmh for s in signs)), frames)
+    images = [run_all._frame_at(cv2.imread(str(folder / 'images' / name), cv2.IMREAD_GRAYSCALE),
+                                truth[name], size[1], size[2], size[3])[0] for name in files]
+    with Detector(DetectorConfig(), backend=backend) as detector:
+        detector.detect(images[0])  # warm-up outside the profile
+        profile = cProfile.Profile()
+        profile.enable()
+        for image in images:
+            detector.detect(image)
+        profile.disable()
+        print(f'{backend} ({detector.renderer}) on {len(images)} frames at {size_name}')
+    _print(profile, lines)
+
+
+def profile_classifier(crops: int, lines: int, params: Path | None) -> None:
+    """Profile ``Classifier.classify_crop`` on ``crops`` GTSRB crops (evenly spaced)."""
+    settings = run_all.BenchSettings(out_dir=Path('.'), pipeline_params=params)
+    classifier = Classifier(run_all.pipeline_config(settings).classifier)
+    labels, _ = read_labels(run_all.DATA_DIR / 'gtsrb-dev')
+    labels = labels[::max(1, len(labels) // crops)][:crops]
+    images = [cv2.imread(str(label.path), cv2.IMREAD_GRAYSCALE) for label in labels]
+    classifier.classify_crop(images[0])
+    profile = cProfile.Profile()
+    profile.enable()
+    for image in images:
+        classifier.classify_crop(image)
+    profile.disable()
+    print(f'classify_crop on {len(images)} crops')
+    _print(profile, lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('stage', choices=('detector', 'classifier'))
+    parser.add_argument('--backend', choices=('gl', 'numpy'), default='gl')
+    parser.add_argument('--size', default='816x480',
+                        choices=[size[0] for size in run_all.DETECTOR_SIZES])
+    parser.add_argument('--frames', type=int, default=8)
+    parser.add_argument('--crops', type=int, default=200)
+    parser.add_argument('--lines', type=int, default=18)
+    parser.add_argument('--params', default=str(run_all.bench_node.PARAMS_FILE),
+                        help="classifier parameter file, as run_all.py --params")
+    args = parser.parse_args(argv)
+    if args.stage == 'detector':
+        profile_detector(args.backend, args.size, args.frames, args.lines)
+    else:
+        profile_classifier(args.crops, args.lines,
+                           None if args.params == 'defaults' else Path(args.params))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

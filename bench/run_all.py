@@ -1,0 +1,530 @@
+#!/usr/bin/env python3
+"""All benchmarks in one run: detector, classifier, pipeline and node, against the peers.
+
+``make bench`` runs this. On the same frames, in the same process and run, it measures:
+
+detector stage (GTSDB scenes, ``../shared/data/gtsdb-dev``)
+    per-frame time (median over the frames) and candidate recall@7 (top 7 candidates;
+    hit: centre within ``max(3, 0.35 r)`` px of the sign's box centre, as ``speed_sign_eval
+    scenes``) of the GL detector, the numpy reference, ``cv2.HoughCircles``
+    (HOUGH_GRADIENT and HOUGH_GRADIENT_ALT) and ``radsym`` (RSD and FRST), with the peers'
+    tuned parameters of ``bench_detector.py``. Frame sizes:
+
+    - ``640x480``: the central 640 columns of the 816x480 scenes (VGA with square pixels;
+      squeezing 816 to 640 would turn the signs into ellipses);
+    - ``816x480``: the data as stored;
+    - ``1280x720``: the scenes resized (x 1.569, y 1.5), truth boxes scaled alike;
+    - ``1920x1080``: resized, time only (fewer frames).
+
+    All methods keep their radius range (4..40 px for the peers, the DetectorConfig's for
+    ours) at every size, so the resized sizes show how time grows with pixels, and
+    signs upscaled beyond 40 px radius are missed by every method alike.
+    Methods are interleaved frame by frame, so machine load hits them alike.
+    Sweeps (816x480, GL and numpy): time vs ``max_radius_px`` and time vs edge count
+    (``gradient_threshold`` varied; edges counted with ``voting_numpy.compute_edges``).
+
+classifier (GTSRB crops, ``../shared/data/gtsrb-dev``)
+    accuracy and ms per crop of the MACE/kth-law/PSR classifier against a plain
+    ``cv2.matchTemplate`` NCC baseline with the same rendered templates
+    (``bench_classifier.bench_crops``), overall and by sign width; plus ms per 640x480
+    frame of 7 candidates (``bench_classifier.bench_speed``).
+
+end to end
+    ``Pipeline`` (the node's parameter file, classifier banks cached) on 640x480 frames of
+    a synthetic drive: frames per second and per-frame latency; and the node through DDS
+    (``bench_node.main``: the installed executable, frames published at 30 Hz).
+
+The papers' headline figures are printed beside them, labelled as quoted.
+
+Output under ``--out DIR``: ``results.json``, ``table.txt`` (the table printed) and PNG
+plots (see ``report.py``). ``--quick`` uses a handful of frames/crops (smoke test, not
+figures to quote). Usage::
+
+    python bench/run_all.py --out out/bench [--quick] [--skip-node]
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import dataclasses
+import io
+import json
+import os
+import platform
+import statistics
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+BENCH_DIR = Path(__file__).resolve().parent
+if str(BENCH_DIR) not in sys.path:  # the sibling bench scripts are plain modules
+    sys.path.insert(0, str(BENCH_DIR))
+
+import bench_classifier  # noqa: E402
+import bench_detector  # noqa: E402
+import bench_node  # noqa: E402
+import report  # noqa: E402
+
+from speed_sign_detector.config import (ClassifierConfig, DetectorConfig,  # noqa: E402
+                                        PipelineConfig, load_yaml, to_parameters)
+from speed_sign_detector.detection.detector import Detector  # noqa: E402
+from speed_sign_detector.detection.voting_numpy import compute_edges  # noqa: E402
+from speed_sign_detector.errors import SpeedSignError  # noqa: E402
+from speed_sign_detector.pipeline import Pipeline  # noqa: E402
+from speed_sign_detector.recognition.classifier import Classifier  # noqa: E402
+from speed_sign_detector.tools.eval_scenes import (SIZE_BINS_PX, SceneSign,  # noqa: E402
+                                                   read_gtsdb_truth)
+
+PROJECT_ROOT = BENCH_DIR.parent
+DATA_DIR = PROJECT_ROOT.parent / 'shared' / 'data'
+#: Where the classifier's filter banks are cached; bench_node's default, so the node
+#: started by the node stage loads the banks the classifier stage built.
+BANK_CACHE = Path(tempfile.gettempdir()) / 'speed_sign_detector_banks'
+NODE_DOMAIN_ID = 131
+
+#: Frame sizes of the detector stage: (name, width, height, how, recall measured).
+#: how: 'crop' = central columns of the scene, 'resize' = cv2.resize of the scene.
+DETECTOR_SIZES: tuple[tuple[str, int, int, str, bool], ...] = (
+    ('640x480', 640, 480, 'crop', True),
+    ('816x480', 816, 480, 'native', True),
+    ('1280x720', 1280, 720, 'resize', True),
+    ('1920x1080', 1920, 1080, 'resize', False),
+)
+OUR_METHODS = ('gl', 'numpy')
+PEER_METHODS = ('hough_gradient', 'hough_gradient_alt', 'radsym_rsd', 'radsym_frst')
+
+#: The papers' headline figures: quoted from /work/shared/papers, NOT measured here.
+PAPER_FIGURES: dict[str, dict[str, object]] = {
+    'rsd_gpu_detection_ivs2011': {
+        'source': 'Glavtchev et al., Feature-Based Speed Limit Sign Detection Using a GPU '
+                  '(IVS 2011), abstract and section V-B',
+        'fps': 33.0, 'frame_size': '640x480', 'detection_rate': 0.88,
+        'hardware': 'Intel Atom 230 @ 1.67 GHz + NVIDIA GeForce 9400M GS',
+        'note': '144 of 164 signs in 43 min of video, up to 7 candidates per frame, with '
+                'tracking (a per-sign rate over a drive, not per-frame recall@7)'},
+    'template_fft_recognition_dagm2010': {
+        'source': 'Muyan-Ozcelik et al., A Template-Based Approach for Real-Time '
+                  'Speed-Limit-Sign Recognition on an Embedded System Using GPU Computing '
+                  '(DAGM 2010)',
+        'fps': 18.5, 'frame_size': '640x240', 'recognition_rate': 0.90,
+        'hardware': 'Intel Core2 Duo P8600 2.4 GHz + NVIDIA GeForce 9600M GT',
+        'note': '120 EU speed-limit signs in 45 min of video (per sign, with temporal '
+                'integration), not per-crop accuracy'},
+}
+
+
+@dataclass(frozen=True)
+class BenchSettings:
+    """How much of each benchmark to run (see ``--help``); defaults are the full run.
+
+    Attributes:
+        out_dir: folder for results.json, table.txt and the PNG plots.
+        gtsdb_dir, gtsrb_dir: the real-data folders.
+        detector_sizes: names of the DETECTOR_SIZES measured.
+        detector_frames: GTSDB scenes with a speed-limit sign, evenly spaced through the
+            sorted list, used for time and recall at every size (0 = all 214).
+        large_frames: of those, how many are timed at the time-only sizes (1920x1080).
+        sweep_frames: of those, how many are timed in the radius / edge-count sweeps.
+        max_radii_px: the max_radius_px values of the radius sweep.
+        gradient_thresholds: the gradient_threshold values of the edge-count sweep.
+        crop_every: GTSRB crops used: every Nth of labels.csv (1 = all 4,400).
+        speed_frames: synthetic 640x480 frames of 7 candidates timed for the classifier.
+        pipeline_frames: synthetic drive frames run through the Pipeline at 640x480.
+        node_seconds: seconds the node is fed at ``node_rate_hz`` (0 = node not run).
+        node_rate_hz: publishing rate of the node stage.
+        pipeline_params: ROS parameter file the pipeline and classifier stages load
+            (the node's); None = PipelineConfig() defaults.
+        classifier_config: overrides the parameter file's classifier config (tests).
+        bank_cache: filter-bank cache folder shared by the classifier, pipeline and node.
+        quick: recorded in the JSON: figures from a smoke run, not to be quoted.
+    """
+
+    out_dir: Path
+    gtsdb_dir: Path = DATA_DIR / 'gtsdb-dev'
+    gtsrb_dir: Path = DATA_DIR / 'gtsrb-dev'
+    detector_frames: int = 36
+    detector_sizes: tuple[str, ...] = tuple(size[0] for size in DETECTOR_SIZES)
+    large_frames: int = 2
+    sweep_frames: int = 3
+    max_radii_px: tuple[float, ...] = (20.0, 40.0, 60.0, 80.0)
+    gradient_thresholds: tuple[float, ...] = (20.0, 40.0, 80.0, 160.0)
+    crop_every: int = 2
+    speed_frames: int = 10
+    pipeline_frames: int = 90
+    node_seconds: float = 8.0
+    node_rate_hz: float = 30.0
+    pipeline_params: Path | None = bench_node.PARAMS_FILE
+    classifier_config: ClassifierConfig | None = None
+    bank_cache: Path = BANK_CACHE
+    quick: bool = False
+    command: tuple[str, ...] = field(default_factory=tuple)
+
+
+QUICK = dict(detector_frames=3, large_frames=1, sweep_frames=1, max_radii_px=(20.0, 40.0),
+             gradient_thresholds=(40.0, 100.0), crop_every=1500, speed_frames=2,
+             pipeline_frames=6, node_seconds=2.0)
+
+
+def _log(message: str) -> None:
+    print(f'[{time.strftime("%H:%M:%S")}] {message}', file=sys.stderr, flush=True)
+
+
+def _median(values: Sequence[float]) -> float | None:
+    return statistics.median(values) if values else None
+
+
+def _percentile(values: Sequence[float], q: float) -> float | None:
+    return float(np.percentile(values, q)) if values else None
+
+
+# --------------------------------------------------------------------------- detector
+def _spaced(items: Sequence[str], count: int) -> list[str]:
+    """``count`` items evenly spaced through ``items`` (all when count <= 0)."""
+    if count <= 0 or count >= len(items):
+        return list(items)
+    return [items[int(i * len(items) / count)] for i in range(count)]
+
+
+def _frame_at(gray: np.ndarray, signs: Sequence[SceneSign], width: int, height: int,
+              how: str) -> tuple[np.ndarray, list[SceneSign]]:
+    """The scene at ``width x height`` and its speed-limit signs in that frame's pixels."""
+    limit_signs = [sign for sign in signs if sign.limit_kmh]
+    if how == 'native':
+        return gray, limit_signs
+    if how == 'crop':
+        image, offset = bench_detector._crop(gray, width)
+        moved = [dataclasses.replace(sign, x1_px=sign.x1_px - offset, x2_px=sign.x2_px - offset)
+                 for sign in limit_signs]
+        return image, [sign for sign in moved if 0 <= sign.centre_px[0] < width]
+    sx, sy = width / gray.shape[1], height / gray.shape[0]
+    image = cv2.resize(gray, (width, height), interpolation=cv2.INTER_LINEAR)
+    return image, [dataclasses.replace(sign, x1_px=sign.x1_px * sx, x2_px=sign.x2_px * sx,
+                                       y1_px=sign.y1_px * sy, y2_px=sign.y2_px * sy)
+                   for sign in limit_signs]
+
+
+def _size_bin(radius_px: float) -> str:
+    for low, high in SIZE_BINS_PX:
+        if low <= radius_px < high:
+            return f'{low:g}-{high:g}' if high < 1000 else f'{low:g}+'
+    return 'other'
+
+
+def detector_methods(config: DetectorConfig) -> tuple[dict[str, bench_detector.Method],
+                                                      list[Detector]]:
+    """Every detector method by name, and our Detector objects (to close)."""
+    gl = Detector(config, backend='gl')
+    numpy_detector = Detector(config, backend='numpy')
+    methods = {'gl': bench_detector._detector_method(gl),
+               'numpy': bench_detector._detector_method(numpy_detector),
+               'hough_gradient': bench_detector.hough_gradient,
+               'hough_gradient_alt': bench_detector.hough_gradient_alt,
+               'radsym_rsd': bench_detector._radsym_method('rsd'),
+               'radsym_frst': bench_detector._radsym_method('frst')}
+    return methods, [gl, numpy_detector]
+
+
+def detector_stage(settings: BenchSettings) -> dict[str, object]:
+    """Time and recall@7 of every method at every size, on the same frames."""
+    truth = read_gtsdb_truth(settings.gtsdb_dir / 'gt.txt')
+    limit_files = sorted(name for name, signs in truth.items()
+                         if any(sign.limit_kmh for sign in signs))
+    files = _spaced(limit_files, settings.detector_frames)
+    scenes = {}
+    for name in files:
+        gray = cv2.imread(str(settings.gtsdb_dir / 'images' / name), cv2.IMREAD_GRAYSCALE)
+        if gray is None:
+            raise SpeedSignError(f'cannot read {settings.gtsdb_dir / "images" / name}')
+        scenes[name] = gray
+    config = DetectorConfig()
+    methods, detectors = detector_methods(config)
+    result: dict[str, object] = {
+        'renderer': detectors[0].renderer, 'backend_gl': detectors[0].backend_name,
+        'config': dataclasses.asdict(config), 'frames_available': len(limit_files),
+        'top_n': bench_detector.TOP_N, 'peer_radius_px': [bench_detector.MIN_RADIUS_PX,
+                                                          bench_detector.MAX_RADIUS_PX],
+        'sizes': {}}
+    try:
+        for size_name, width, height, how, with_recall in DETECTOR_SIZES:
+            if size_name not in settings.detector_sizes:
+                continue
+            size_files = files if with_recall else files[:settings.large_frames]
+            times: dict[str, list[float]] = {name: [] for name in methods}
+            found: dict[str, int] = {name: 0 for name in methods}
+            found_by_bin: dict[str, dict[str, int]] = {name: {} for name in methods}
+            signs_by_bin: dict[str, int] = {}
+            signs_total = 0
+            started = time.perf_counter()
+            for index, name in enumerate(size_files):
+                image, signs = _frame_at(scenes[name], truth[name], width, height, how)
+                for sign in signs:
+                    signs_by_bin[_size_bin(sign.radius_px)] = \
+                        signs_by_bin.get(_size_bin(sign.radius_px), 0) + 1
+                signs_total += len(signs)
+                for method_name, method in methods.items():
+                    if index == 0 and method_name == 'gl':
+                        method(image)  # warm-up: shaders and per-size GL resources
+                    start = time.perf_counter()
+                    centres = method(image)
+                    times[method_name].append(1e3 * (time.perf_counter() - start))
+                    for sign in signs:
+                        if bench_detector._found(sign, centres, 0.0):
+                            found[method_name] += 1
+                            bin_name = _size_bin(sign.radius_px)
+                            found_by_bin[method_name][bin_name] = \
+                                found_by_bin[method_name].get(bin_name, 0) + 1
+            rows = {}
+            for method_name in methods:
+                rows[method_name] = {
+                    'median_ms': _median(times[method_name]),
+                    'p90_ms': _percentile(times[method_name], 90),
+                    'best_ms': min(times[method_name]),
+                    'recall': (found[method_name] / signs_total
+                               if with_recall and signs_total else None),
+                    'recall_by_radius_px': ({b: found_by_bin[method_name].get(b, 0) / n
+                                             for b, n in sorted(signs_by_bin.items())}
+                                            if with_recall else None)}
+            result['sizes'][size_name] = {
+                'width': width, 'height': height, 'how': how, 'frames': len(size_files),
+                'signs': signs_total if with_recall else None,
+                'signs_by_radius_px': dict(sorted(signs_by_bin.items())) if with_recall
+                else None, 'methods': rows}
+            fastest = min(PEER_METHODS, key=lambda m: rows[m]['median_ms'])
+            result['sizes'][size_name]['fastest_peer'] = fastest
+            _log(f'detector {size_name}: {len(size_files)} frames, {signs_total} signs, '
+                 f'{time.perf_counter() - started:.0f} s; ' + ', '.join(
+                     f'{m} {rows[m]["median_ms"]:.0f} ms' for m in methods))
+    finally:
+        for detector in detectors:
+            detector.close()
+    result['frames'] = files
+    result['sweeps'] = detector_sweeps(settings, [scenes[name] for name in
+                                                  files[:settings.sweep_frames]], config)
+    return result
+
+
+def _time_detector(config: DetectorConfig, backend: str, frames: Sequence[np.ndarray]
+                   ) -> float:
+    """Median ms per frame of a fresh Detector (one warm-up call first)."""
+    with Detector(config, backend=backend) as detector:
+        detector.detect(frames[0])
+        times = []
+        for gray in frames:
+            start = time.perf_counter()
+            detector.detect(gray)
+            times.append(1e3 * (time.perf_counter() - start))
+    return statistics.median(times)
+
+
+def detector_sweeps(settings: BenchSettings, frames: Sequence[np.ndarray],
+                    base: DetectorConfig) -> dict[str, list[dict[str, float]]]:
+    """GL and numpy time vs max radius, and vs edge count (gradient threshold varied)."""
+    radius_rows = []
+    for max_radius in settings.max_radii_px:
+        config = dataclasses.replace(base, max_radius_px=max_radius)
+        radius_rows.append({'max_radius_px': max_radius,
+                            **{f'{b}_ms': _time_detector(config, b, frames)
+                               for b in OUR_METHODS}})
+    edge_rows = []
+    for threshold in settings.gradient_thresholds:
+        config = dataclasses.replace(base, gradient_threshold=threshold)
+        edges = statistics.median(sum(level.count for level in compute_edges(gray, config))
+                                  for gray in frames)
+        edge_rows.append({'gradient_threshold': threshold, 'edges': edges,
+                          **{f'{b}_ms': _time_detector(config, b, frames)
+                             for b in OUR_METHODS}})
+    _log(f'detector sweeps: {len(frames)} frames at 816x480')
+    return {'frames': len(frames), 'size': '816x480', 'max_radius': radius_rows,
+            'edge_count': edge_rows}
+
+
+# ------------------------------------------------------------------------- classifier
+def pipeline_config(settings: BenchSettings) -> PipelineConfig:
+    """The node's pipeline config (or the defaults), banks cached in ``bank_cache``."""
+    config = (load_yaml(settings.pipeline_params) if settings.pipeline_params is not None
+              else PipelineConfig())
+    classifier = settings.classifier_config or config.classifier
+    return dataclasses.replace(config, classifier=dataclasses.replace(
+        classifier, cache_dir=str(settings.bank_cache)))
+
+
+def classifier_stage(settings: BenchSettings) -> dict[str, object]:
+    """Classifier vs NCC baseline on GTSRB crops, and ms per frame of 7 candidates."""
+    config = pipeline_config(settings).classifier
+    started = time.perf_counter()
+    classifier = Classifier(config)
+    result: dict[str, object] = {'bank_load_or_build_s': time.perf_counter() - started,
+                                 'bank_mb': classifier.bank_nbytes / 1e6,
+                                 'config': dataclasses.asdict(config),
+                                 'crop_every': settings.crop_every}
+    result.update(bench_classifier.bench_speed(classifier, settings.speed_frames))
+    result['speed_frames'] = settings.speed_frames
+    started = time.perf_counter()
+    result.update(bench_classifier.bench_crops(classifier, settings.gtsrb_dir,
+                                               settings.crop_every))
+    _log(f'classifier: {result["crops"]} crops in {time.perf_counter() - started:.0f} s, '
+         f'accuracy {result["classifier_accuracy"]:.3f} vs NCC '
+         f'{result["ncc_baseline_accuracy"]:.3f}')
+    return result
+
+
+# ------------------------------------------------------------------------ end to end
+def pipeline_stage(settings: BenchSettings) -> dict[str, object]:
+    """Pipeline fps and per-frame latency at 640x480 on a synthetic drive."""
+    frames = [cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
+              for bgr in bench_node.drive_frames(640, 480, settings.pipeline_frames + 2)]
+    config = pipeline_config(settings)
+    with Pipeline(config) as pipeline:
+        for index in range(2):  # warm-up (GL resources of this size, FFT plans)
+            pipeline.process(frames[index], stamp_s=index / 30.0)
+        pipeline.reset()
+        stages: dict[str, list[float]] = {}
+        recognized = []
+        started = time.perf_counter()
+        for index, gray in enumerate(frames[2:]):
+            frame_result = pipeline.process(gray, stamp_s=index / 30.0)
+            for key, value in frame_result.timings_ms.items():
+                stages.setdefault(key, []).append(value)
+            if frame_result.recognized_limit_kmh:
+                recognized.append(frame_result.recognized_limit_kmh)
+        elapsed = time.perf_counter() - started
+        backend, renderer = pipeline.backend_name, pipeline.renderer
+    result = {'frames': len(frames) - 2, 'width': 640, 'height': 480, 'backend': backend,
+              'renderer': renderer, 'fps': (len(frames) - 2) / elapsed,
+              'latency_p50_ms': _percentile(stages['total'], 50),
+              'latency_p95_ms': _percentile(stages['total'], 95),
+              'stage_p50_ms': {key: _percentile(values, 50) for key, values in stages.items()},
+              'limits_recognized': recognized,
+              'params_file': str(settings.pipeline_params) if settings.pipeline_params
+              else None}
+    _log(f'pipeline: {result["fps"]:.1f} fps, p50 {result["latency_p50_ms"]:.0f} ms')
+    return result
+
+
+def node_stage(settings: BenchSettings) -> dict[str, object]:
+    """The node through DDS (``bench_node.main``), one publishing rate."""
+    argv = ['--rates', f'{settings.node_rate_hz:g}', '--seconds', f'{settings.node_seconds:g}',
+            '--frames', '60', '--domain-id', str(NODE_DOMAIN_ID),
+            '--bank-cache', str(settings.bank_cache), '--json']
+    captured = io.StringIO()
+    with contextlib.redirect_stdout(captured):
+        code = bench_node.main(argv)
+    lines = captured.getvalue().strip().splitlines()
+    if code != 0 or not lines:
+        raise SpeedSignError(f'bench_node.main({argv}) exited with {code} (see its stderr)')
+    result = json.loads(lines[-1])
+    result['argv'] = argv
+    return result
+
+
+# ----------------------------------------------------------------------------- driver
+def _machine() -> dict[str, object]:
+    load = os.getloadavg() if hasattr(os, 'getloadavg') else None
+    return {'cpus': os.cpu_count(), 'platform': platform.platform(),
+            'processor': platform.processor() or platform.machine(),
+            'python': platform.python_version(), 'opencv': cv2.__version__,
+            'load_average_at_start': list(load) if load else None}
+
+
+Stage = Callable[[BenchSettings], dict[str, object]]
+
+
+def run_benchmark(settings: BenchSettings) -> dict[str, object]:
+    """Run every stage, write results.json, table.txt and the plots; returns the results.
+
+    A stage that fails is recorded as ``{'error': message}`` (and reported) while the
+    others still run.
+    """
+    settings.out_dir.mkdir(parents=True, exist_ok=True)
+    started = time.perf_counter()
+    results: dict[str, object] = {
+        'date_utc': datetime.now(timezone.utc).isoformat(timespec='seconds'),
+        'command': list(settings.command), 'quick': settings.quick,
+        'machine': _machine(),
+        'gpu': 'none measured: figures are from the GL backend on whatever renderer '
+               'detector.renderer names (llvmpipe = CPU)',
+        'settings': {k: (str(v) if isinstance(v, Path) else v)
+                     for k, v in dataclasses.asdict(settings).items()},
+        'paper_figures_quoted_not_measured': PAPER_FIGURES,
+    }
+    stages: list[tuple[str, Stage]] = [('detector', detector_stage),
+                                       ('classifier', classifier_stage),
+                                       ('pipeline', pipeline_stage)]
+    if settings.node_seconds > 0:
+        stages.append(('node', node_stage))
+    else:
+        results['node'] = {'skipped': 'node_seconds = 0'}
+    for name, stage in stages:
+        stage_started = time.perf_counter()
+        try:
+            results[name] = stage(settings)
+        except (SpeedSignError, OSError, RuntimeError, ValueError) as err:
+            _log(f'{name} stage FAILED: {type(err).__name__}: {err}')
+            results[name] = {'error': f'{type(err).__name__}: {err}'}
+        results[name]['stage_s'] = time.perf_counter() - stage_started
+    if 'pipeline' in results and 'error' not in results['pipeline']:
+        with contextlib.suppress(SpeedSignError, OSError):
+            results['pipeline']['config'] = to_parameters(pipeline_config(settings))
+    results['elapsed_s'] = time.perf_counter() - started
+    table = report.format_table(results)
+    results['plots'] = [str(path) for path in report.write_plots(results, settings.out_dir)]
+    report.write_json(results, settings.out_dir / 'results.json')
+    (settings.out_dir / 'table.txt').write_text(table + '\n')
+    print(table)
+    return results
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Parse the options, run, print the table; 1 when a stage failed."""
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--out', type=Path, required=True, help='output folder')
+    parser.add_argument('--quick', action='store_true',
+                        help='a few frames/crops only (smoke test; figures not to quote)')
+    parser.add_argument('--gtsdb', type=Path, default=DATA_DIR / 'gtsdb-dev')
+    parser.add_argument('--gtsrb', type=Path, default=DATA_DIR / 'gtsrb-dev')
+    parser.add_argument('--detector-frames', type=int,
+                        help='GTSDB speed-limit scenes for time + recall (0 = all 214)')
+    parser.add_argument('--crop-every', type=int, help='use every Nth GTSRB crop')
+    parser.add_argument('--pipeline-frames', type=int)
+    parser.add_argument('--node-seconds', type=float, help='0 = do not run the node')
+    parser.add_argument('--skip-node', action='store_true', help='same as --node-seconds 0')
+    parser.add_argument('--params', default=str(bench_node.PARAMS_FILE),
+                        help="parameter file of the pipeline and classifier stages (the "
+                             "node's, which the node stage uses); 'defaults' = PipelineConfig()")
+    args = parser.parse_args(argv)
+    overrides: dict[str, object] = dict(QUICK) if args.quick else {}
+    for option, name in (('detector_frames', 'detector_frames'), ('crop_every', 'crop_every'),
+                         ('pipeline_frames', 'pipeline_frames'),
+                         ('node_seconds', 'node_seconds')):
+        if getattr(args, option) is not None:
+            overrides[name] = getattr(args, option)
+    if args.skip_node:
+        overrides['node_seconds'] = 0.0
+    command = ('python', 'bench/run_all.py', *(sys.argv[1:] if argv is None else argv))
+    params = None if args.params == 'defaults' else Path(args.params)
+    settings = BenchSettings(out_dir=args.out, gtsdb_dir=args.gtsdb, gtsrb_dir=args.gtsrb,
+                             pipeline_params=params, quick=args.quick, command=command,
+                             **overrides)
+    for folder in (settings.gtsdb_dir, settings.gtsrb_dir):
+        if not folder.is_dir():
+            print(f'data folder {folder} not found (see ../shared/data/README)',
+                  file=sys.stderr)
+            return 2
+    results = run_benchmark(settings)
+    failed = [name for name, value in results.items()
+              if isinstance(value, dict) and 'error' in value]
+    print(f'\nwrote {settings.out_dir}/results.json, table.txt and {len(results["plots"])} '
+          f'plots in {results["elapsed_s"]:.0f} s' + (f'; FAILED stages: {failed}' if failed
+                                                      else ''))
+    return 1 if failed else 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,97 @@
+"""Smoke test of the benchmark driver: bench/run_all.py on 2 scenes and 3 crops.
+
+Runs the real stages (GL and numpy detectors, cv2.HoughCircles, radsym, the classifier
+against the NCC baseline, the Pipeline) on a few real frames and crops into tmp_path,
+and checks that the JSON, the table and the PNG plots are written with the expected
+keys. No timing figure is asserted; the node stage (DDS, a second process) is left to
+test_node*.py and to ``make bench``.
+"""
+from __future__ import annotations
+
+import importlib
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+from speed_sign_detector.config import ClassifierConfig
+
+BENCH_DIR = Path(__file__).resolve().parents[1] / 'bench'
+METHODS = {'gl', 'numpy', 'hough_gradient', 'hough_gradient_alt', 'radsym_rsd', 'radsym_frst'}
+
+
+@pytest.fixture(scope='module')
+def run_all():
+    """The bench/run_all.py module (bench/ is a folder of scripts, not a package)."""
+    pytest.importorskip('radsym', reason='radsym (setup.py extra "bench") not installed')
+    pytest.importorskip('matplotlib', reason='matplotlib (setup.py extra "bench") not installed')
+    sys.path.insert(0, str(BENCH_DIR))
+    try:
+        yield importlib.import_module('run_all')
+    finally:
+        sys.path.remove(str(BENCH_DIR))
+
+
+@pytest.fixture(scope='module')
+def results(run_all, shared_data_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> dict:
+    out = tmp_path_factory.mktemp('bench')
+    settings = run_all.BenchSettings(
+        out_dir=out, gtsdb_dir=shared_data_dir / 'gtsdb-dev',
+        gtsrb_dir=shared_data_dir / 'gtsrb-dev', detector_frames=2, large_frames=1,
+        detector_sizes=('640x480', '816x480'), sweep_frames=1, max_radii_px=(20.0, 40.0),
+        gradient_thresholds=(40.0, 120.0), crop_every=1500, speed_frames=1,
+        pipeline_frames=3, node_seconds=0.0, pipeline_params=None,
+        classifier_config=ClassifierConfig(max_radius_px=24.0),
+        bank_cache=out / 'banks', quick=True, command=('test',))
+    returned = run_all.run_benchmark(settings)
+    return {'returned': returned, 'out': out}
+
+
+def test_writes_json_table_and_plots(results: dict) -> None:
+    out: Path = results['out']
+    saved = json.loads((out / 'results.json').read_text())
+    assert saved['quick'] is True
+    for key in ('date_utc', 'machine', 'settings', 'paper_figures_quoted_not_measured',
+                'detector', 'classifier', 'pipeline', 'node', 'elapsed_s', 'plots'):
+        assert key in saved, key
+    assert 'skipped' in saved['node']
+    for stage in ('detector', 'classifier', 'pipeline'):
+        assert 'error' not in saved[stage], saved[stage]
+    names = {Path(path).name for path in saved['plots']}
+    assert names == {'detector_time_vs_frame_size.png', 'detector_recall.png',
+                     'detector_sweeps.png', 'classifier_accuracy_vs_size.png'}
+    for name in names:
+        assert (out / name).read_bytes()[:8] == b'\x89PNG\r\n\x1a\n', name
+    table = (out / 'table.txt').read_text()
+    assert 'QUOTED' in table and 'plain NCC' in table and 'radsym RSD' in table
+
+
+def test_detector_section_has_every_method_size_and_sweep(results: dict) -> None:
+    detector = results['returned']['detector']
+    assert set(detector['sizes']) == {'640x480', '816x480'}
+    for size in detector['sizes'].values():
+        assert set(size['methods']) == METHODS
+        assert size['frames'] == 2 and size['signs'] >= 2
+        for row in size['methods'].values():
+            assert row['median_ms'] > 0
+            assert 0.0 <= row['recall'] <= 1.0
+    sweeps = detector['sweeps']
+    assert [row['max_radius_px'] for row in sweeps['max_radius']] == [20.0, 40.0]
+    low, high = sweeps['edge_count']
+    assert low['edges'] > high['edges'] > 0  # a higher gradient threshold keeps fewer edges
+    assert all(row['gl_ms'] > 0 and row['numpy_ms'] > 0
+               for row in sweeps['max_radius'] + sweeps['edge_count'])
+
+
+def test_classifier_and_pipeline_sections(results: dict) -> None:
+    classifier = results['returned']['classifier']
+    assert classifier['crops'] == 3
+    for key in ('classifier_accuracy', 'ncc_baseline_accuracy'):
+        assert 0.0 <= classifier[key] <= 1.0
+    assert sum(classifier['count_by_size_px'].values()) == 3
+    assert set(classifier['classifier_by_size_px']) == set(classifier['count_by_size_px'])
+    pipeline = results['returned']['pipeline']
+    assert pipeline['frames'] == 3 and pipeline['fps'] > 0
+    assert {'detect', 'classify', 'track', 'total'} <= set(pipeline['stage_p50_ms'])
+    assert pipeline['backend'] in {'gl', 'numpy'}

@@ -1,0 +1,213 @@
+"""Detector on synthetic frames: rings, a rendered sign, no circle, bad input, sizes, close.
+
+Runs the real GL backend (headless EGL; llvmpipe here) and the numpy reference.
+"""
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from speed_sign_detector.config import DetectorConfig
+from speed_sign_detector.detection.candidates import Candidate
+from speed_sign_detector.detection.detector import Detector
+from speed_sign_detector.detection.gradients import InvalidFrameError
+from speed_sign_detector.errors import ConfigError, DetectorError
+
+SUPERSAMPLE = 8
+BACKGROUND_GRAY = 110
+
+
+def ring_frame(width: int, height: int, centre: tuple[float, float], radius: float,
+               ring_gray: int = 40, disc_gray: int = 230,
+               background_gray: int = BACKGROUND_GRAY) -> np.ndarray:
+    """A dark ring of outer radius ``radius`` around a white disc (radius 0.8 x), anti-aliased.
+
+    ``centre`` is in pixel coordinates (pixel (i, j) has its centre at x=j, y=i).
+    """
+    big = np.full((height * SUPERSAMPLE, width * SUPERSAMPLE), background_gray, np.uint8)
+    shift = 4
+    scale = SUPERSAMPLE * (1 << shift)
+    point = (int(round((centre[0] + 0.5) * scale - (1 << shift) / 2)),
+             int(round((centre[1] + 0.5) * scale - (1 << shift) / 2)))
+    cv2.circle(big, point, int(round(radius * scale)), ring_gray, -1, cv2.LINE_AA, shift)
+    cv2.circle(big, point, int(round(0.8 * radius * scale)), disc_gray, -1, cv2.LINE_AA,
+               shift)
+    return cv2.resize(big, (width, height), interpolation=cv2.INTER_AREA)
+
+
+def sign_frame(width: int, height: int, corner: tuple[int, int],
+               diameter_px: int) -> tuple[np.ndarray, tuple[float, float]]:
+    """A rendered 50 km/h sign pasted on a gray background; returns (gray, centre)."""
+    from speed_sign_detector.recognition.templates import render_sign
+
+    canvas = np.full((height, width, 3), 120, np.uint8)
+    bgr, alpha = render_sign('50', diameter_px)
+    x0, y0 = corner
+    region = canvas[y0:y0 + diameter_px, x0:x0 + diameter_px].astype(np.float32)
+    blended = region * (1.0 - alpha[..., None]) + bgr.astype(np.float32) * alpha[..., None]
+    canvas[y0:y0 + diameter_px, x0:x0 + diameter_px] = np.rint(blended).astype(np.uint8)
+    centre = (x0 + diameter_px / 2 - 0.5, y0 + diameter_px / 2 - 0.5)
+    return cv2.cvtColor(canvas, cv2.COLOR_BGR2GRAY), centre
+
+
+@pytest.fixture(scope='module', params=['gl', 'numpy'])
+def detector(request: pytest.FixtureRequest) -> Detector:
+    with Detector(DetectorConfig(), backend=request.param) as instance:
+        yield instance
+
+
+def band_of(detector: Detector, radius_px: float) -> int:
+    """Index of the band whose radius range holds ``radius_px``."""
+    for band in detector.bands:
+        if band.min_radius_px <= radius_px < band.max_radius_px:
+            return band.index
+    raise AssertionError(f'radius {radius_px} outside every band')
+
+
+def assert_found(candidate: Candidate, centre: tuple[float, float], voting_radius: float,
+                 detector: Detector) -> None:
+    error = math.hypot(candidate.x_px - centre[0], candidate.y_px - centre[1])
+    assert error <= 1.0, f'centre off by {error:.2f} px: {candidate} vs {centre}'
+    assert abs(candidate.band - band_of(detector, voting_radius)) <= 1, candidate
+    assert 0.6 * voting_radius <= candidate.radius_px <= 1.4 * voting_radius, candidate
+
+
+@pytest.mark.parametrize('radius', [6.0, 9.0, 16.0, 30.0])
+def test_ring_centre_and_radius(detector: Detector, radius: float) -> None:
+    centre = (101.3, 78.6)
+    frame = ring_frame(200, 160, centre, radius)
+    candidates = detector.detect(frame)
+    assert candidates, 'no candidate for a clean ring'
+    # the white disc's edge (0.8 x the outer radius) is what votes with bright_inside
+    assert_found(candidates[0], centre, 0.8 * radius, detector)
+    assert candidates[0].score > 0.5
+
+
+@pytest.mark.parametrize('diameter', [14, 28, 56])
+def test_rendered_sign(detector: Detector, diameter: int) -> None:
+    frame, centre = sign_frame(200, 160, (70, 40), diameter)
+    candidates = detector.detect(frame)
+    best = candidates[0]
+    error = math.hypot(best.x_px - centre[0], best.y_px - centre[1])
+    assert error <= 1.0, f'centre off by {error:.2f} px: {best} vs {centre}'
+    inner_radius = 0.8 * diameter / 2
+    assert abs(best.band - band_of(detector, inner_radius)) <= 1, best
+
+
+def test_no_circle_gives_no_strong_candidate(detector: Detector) -> None:
+    rng = np.random.default_rng(3)
+    frame = np.full((160, 200), 100, np.uint8)
+    cv2.rectangle(frame, (30, 30), (150, 120), 200, -1)
+    cv2.line(frame, (0, 140), (199, 150), 30, 3)
+    frame = np.clip(frame + rng.normal(0, 2, frame.shape), 0, 255).astype(np.uint8)
+    candidates = detector.detect(frame)
+    ring = ring_frame(200, 160, (100.0, 80.0), 12.0)
+    ring_score = detector.detect(ring)[0].score
+    assert all(candidate.score < 0.4 * ring_score for candidate in candidates), candidates
+    assert detector.detect(np.full((160, 200), 90, np.uint8)) == ()
+
+
+def test_candidates_sorted_suppressed_and_limited(detector: Detector) -> None:
+    frame = ring_frame(320, 200, (60.0, 60.0), 10.0)
+    for x, y, radius in ((160.0, 70.0, 14.0), (250.0, 120.0, 8.0), (90.0, 150.0, 20.0)):
+        frame = _paste(frame, ring_frame(320, 200, (x, y), radius))
+    candidates = detector.detect(frame)
+    assert len(candidates) <= detector.config.max_candidates
+    scores = [candidate.score for candidate in candidates]
+    assert scores == sorted(scores, reverse=True)
+    for index, first in enumerate(candidates):
+        for second in candidates[index + 1:]:
+            distance = math.hypot(first.x_px - second.x_px, first.y_px - second.y_px)
+            assert distance >= max(first.radius_px, second.radius_px)
+    centres = [(60.0, 60.0), (160.0, 70.0), (250.0, 120.0), (90.0, 150.0)]
+    for x, y in centres:
+        assert any(math.hypot(c.x_px - x, c.y_px - y) <= 1.0 for c in candidates[:4]), (x, y)
+
+
+def _paste(frame: np.ndarray, other: np.ndarray) -> np.ndarray:
+    """Keep ``other`` wherever it differs from the plain background."""
+    return np.where(other != BACKGROUND_GRAY, other, frame)
+
+
+@pytest.mark.parametrize('bad, message', [
+    (np.zeros((0, 0), np.uint8), 'empty'),
+    (np.zeros((100, 100, 3), np.uint8), '2-D'),
+    (np.zeros((100, 100), np.int32), 'dtype'),
+    (np.zeros((40, 200), np.uint8), 'smaller than the voting window'),
+    (np.full((100, 100), np.nan, np.float32), 'NaN'),
+    (np.full((100, 100), 300.0), 'lie in'),
+    ([[1, 2], [3, 4]], 'numpy array'),
+])
+def test_bad_input_raises_value_error(detector: Detector, bad: object, message: str) -> None:
+    with pytest.raises(ValueError, match=message) as info:
+        detector.detect(bad)  # type: ignore[arg-type]
+    assert isinstance(info.value, InvalidFrameError)
+
+
+def test_float_frame_accepted(detector: Detector) -> None:
+    centre = (100.0, 80.0)
+    frame = ring_frame(200, 160, centre, 12.0)
+    from_float = detector.detect(frame.astype(np.float32))
+    assert from_float == detector.detect(frame)
+
+
+def test_varying_frame_sizes(detector: Detector) -> None:
+    results = []
+    for width, height in ((640, 480), (816, 480), (1280, 720), (640, 480)):
+        centre = (width * 0.61 + 0.3, height * 0.37 - 0.2)
+        frame = ring_frame(width, height, centre, 14.0)
+        candidates = detector.detect(frame)
+        assert_found(candidates[0], centre, 0.8 * 14.0, detector)
+        results.append(candidates)
+    assert results[0] == results[3]
+
+
+def test_vote_images_shapes(detector: Detector) -> None:
+    frame = ring_frame(200, 160, (100.0, 80.0), 12.0)
+    images = detector.vote_images(frame)
+    assert len(images) == len(detector.bands)
+    for band, image in zip(detector.bands, images):
+        assert image.dtype == np.float32
+        assert image.shape == (160 >> band.target_level, 200 >> band.target_level, 2)
+        assert np.all(image >= 0.0)
+
+
+def test_close_releases_and_rejects_use() -> None:
+    gl = Detector(DetectorConfig(), backend='gl')
+    assert gl.backend_name == 'gl' and 'numpy' not in gl.renderer
+    voter = gl._gl
+    gl.close()
+    assert gl.closed and voter.released
+    gl.close()  # idempotent
+    with pytest.raises(DetectorError, match='closed'):
+        gl.detect(np.zeros((160, 200), np.uint8))
+
+
+def test_unknown_backend_and_bad_config() -> None:
+    with pytest.raises(ConfigError, match='backend'):
+        Detector(DetectorConfig(), backend='cuda')
+    with pytest.raises(ConfigError):
+        DetectorConfig(min_radius_px=30.0, max_radius_px=20.0)
+    with pytest.raises(ConfigError):
+        DetectorConfig(polarity='sideways')
+
+
+def test_polarity_options() -> None:
+    """A dark disc on a bright background is found with dark_inside or both only."""
+    centre = (100.0, 80.0)
+    frame = ring_frame(200, 160, centre, 14.0, ring_gray=220, disc_gray=30,
+                       background_gray=220)
+    scores = {}
+    for polarity in ('bright_inside', 'dark_inside', 'both'):
+        with Detector(DetectorConfig(polarity=polarity), backend='gl') as detector:
+            candidates = detector.detect(frame)
+            near = [c for c in candidates
+                    if math.hypot(c.x_px - centre[0], c.y_px - centre[1]) <= 1.0]
+            scores[polarity] = near[0].score if near else 0.0
+    assert scores['dark_inside'] > 0.5
+    # 'both' scores are halved (two vote directions), and only the inner edge votes here
+    assert scores['both'] > 0.35
+    assert scores['bright_inside'] < 0.5 * min(scores['dark_inside'], scores['both'])

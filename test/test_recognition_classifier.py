@@ -1,0 +1,221 @@
+"""Classifier on rendered signs under perspective, blur, noise, contrast loss and
+rotation; rejection of look-alikes and blank/noise patches; bad inputs."""
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from speed_sign_detector.config import ClassifierConfig
+from speed_sign_detector.detection.candidates import Candidate
+from speed_sign_detector.recognition.classifier import (
+    LABEL_NO_SIGN,
+    Classification,
+    Classifier,
+    ClassifierInputError,
+    bank_radii,
+    build_banks,
+)
+from speed_sign_detector.recognition.templates import render_sign
+
+#: Banks up to radius 30 px only, to keep the module fast (the default goes to 48).
+TEST_CONFIG = ClassifierConfig(max_radius_px=30.0, cache_dir='')
+
+
+@pytest.fixture(scope='module')
+def cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tmp_path_factory.mktemp('filter_banks')
+
+
+@pytest.fixture(scope='module')
+def classifier(cache_dir: Path) -> Classifier:
+    return Classifier(dataclasses.replace(TEST_CONFIG, cache_dir=str(cache_dir)))
+
+
+def _background(shape: tuple[int, int], seed: int) -> np.ndarray:
+    """Smooth textured gray background (sky/trees-like), uint8."""
+    rng = np.random.default_rng(seed)
+    coarse = rng.uniform(40, 200, (shape[0] // 16 + 2, shape[1] // 16 + 2)).astype(np.float32)
+    smooth = cv2.resize(coarse, (shape[1], shape[0]), interpolation=cv2.INTER_CUBIC)
+    return np.clip(smooth + rng.normal(0, 6, shape), 0, 255).astype(np.uint8)
+
+
+def make_scene(kind: str, radius_px: float, *, yaw_deg: float = 0.0, roll_deg: float = 0.0,
+               blur_px: float = 0.0, noise: float = 0.0, contrast: float = 1.0,
+               seed: int = 0, shape: tuple[int, int] = (120, 160),
+               centre: tuple[float, float] = (80.0, 60.0)) -> np.ndarray:
+    """A gray frame with one rendered sign at ``centre`` (x, y), distorted."""
+    diameter = int(round(2 * radius_px * 4))
+    bgr, alpha = render_sign(kind, diameter)
+    gray_sign = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype(np.float32)
+    # perspective (yaw) + in-plane rotation + scale down by 4, in one homography
+    half = diameter / 2.0
+    yaw = math.radians(yaw_deg)
+    corners = np.float32([[0, 0], [diameter, 0], [diameter, diameter], [0, diameter]])
+    distance = 6.0 * diameter
+    projected = []
+    for x, y in corners - half:
+        z = x * math.sin(yaw)
+        u = distance * x * math.cos(yaw) / (distance + z)
+        v = distance * y / (distance + z)
+        c, s = math.cos(math.radians(roll_deg)), math.sin(math.radians(roll_deg))
+        projected.append((c * u + s * v, -s * u + c * v))
+    target = np.float32(projected) / 4.0 + np.float32(centre)
+    homography = cv2.getPerspectiveTransform(corners, target)
+    size = (shape[1], shape[0])
+    warped_sign = cv2.warpPerspective(gray_sign, homography, size, flags=cv2.INTER_AREA)
+    warped_alpha = cv2.warpPerspective(alpha, homography, size, flags=cv2.INTER_AREA)
+    frame = _background(shape, seed).astype(np.float32)
+    frame = warped_sign + (1.0 - warped_alpha) * frame
+    if blur_px > 0:
+        frame = cv2.GaussianBlur(frame, (0, 0), blur_px)
+    frame = 128.0 + (frame - 128.0) * contrast
+    if noise > 0:
+        frame += np.random.default_rng(seed + 1).normal(0, noise, frame.shape)
+    return np.clip(frame, 0, 255).astype(np.uint8)
+
+
+def _candidate(radius_px: float, error_px: float = 0.0) -> Candidate:
+    return Candidate(80.0 + error_px, 60.0 - error_px, radius_px * 1.08, 1.0)
+
+
+DISTORTIONS = {
+    'clean': {},
+    'yaw 25 deg': {'yaw_deg': 25.0},
+    'blur 1.2 px': {'blur_px': 1.2},
+    'noise 10': {'noise': 10.0},
+    'contrast 35%': {'contrast': 0.35},
+    'roll +6 deg': {'roll_deg': 6.0},
+    'roll -6 deg': {'roll_deg': -6.0},
+    'all at once': {'yaw_deg': -20.0, 'blur_px': 0.8, 'noise': 6.0, 'contrast': 0.5,
+                    'roll_deg': 4.0},
+}
+
+
+@pytest.mark.parametrize('distortion', sorted(DISTORTIONS))
+def test_rendered_limits_read_under_distortion(classifier: Classifier, distortion: str) -> None:
+    wrong = []
+    for index, value in enumerate((20, 30, 50, 60, 70, 80, 100, 120)):
+        radius = 14.0 + 2.0 * (index % 4)
+        frame = make_scene(str(value), radius, seed=index, **DISTORTIONS[distortion])
+        result = classifier.classify(frame, [_candidate(radius, error_px=1.5)])[0]
+        if result.limit_kmh != value:
+            wrong.append((value, result.label, round(result.psr, 1)))
+    assert not wrong, f'{distortion}: misread {wrong}'
+
+
+def test_every_limit_value_reads_clean(classifier: Classifier) -> None:
+    misread = []
+    for value in (5, 10, 20, 30, 40, 50, 60, 70, 80, 90, 100, 110, 120, 130):
+        result = classifier.classify(make_scene(str(value), 16.0, seed=value),
+                                     [_candidate(16.0)])[0]
+        if result.limit_kmh != value:
+            misread.append((value, result.label))
+    assert not misread
+
+
+def test_result_fields_locate_and_size_the_sign(classifier: Classifier) -> None:
+    frame = make_scene('70', 18.0, roll_deg=6.0, seed=3)
+    result = classifier.classify(frame, [Candidate(82.0, 58.0, 15.0, 1.0)])[0]
+    assert result.label == '70' and result.limit_kmh == 70 and result.is_limit
+    assert abs(result.x_px - 80.0) <= 2.0 and abs(result.y_px - 60.0) <= 2.0
+    assert result.radius_px == pytest.approx(18.0, rel=0.2)
+    assert result.rotation_deg == pytest.approx(6.0)
+    assert result.margin > 0 and result.psr > classifier.config.psr_threshold
+
+
+def test_small_and_large_signs_are_rescaled(classifier: Classifier) -> None:
+    small = make_scene('50', 9.0, seed=11)
+    large = make_scene('50', 40.0, seed=12, shape=(200, 240), centre=(120.0, 100.0))
+    assert classifier.classify(small, [_candidate(9.0)])[0].limit_kmh == 50
+    result = classifier.classify(large, [Candidate(120.0, 100.0, 42.0, 1.0)])[0]
+    assert result.limit_kmh == 50
+    assert result.radius_px == pytest.approx(40.0, rel=0.2)
+
+
+@pytest.mark.parametrize('kind', ['no_overtaking', 'no_entry', 'weight_limit', 'width_limit',
+                                  'height_limit', 'end_of_limit_80', 'end_of_limit_60',
+                                  'end_of_restrictions'])
+def test_lookalikes_are_not_read_as_limits(classifier: Classifier, kind: str) -> None:
+    for seed, radius in enumerate((13.0, 17.0, 22.0)):
+        frame = make_scene(kind, radius, seed=seed, blur_px=0.6)
+        result = classifier.classify(frame, [_candidate(radius)])[0]
+        assert not result.is_limit, f'{kind} at radius {radius} read as {result.label}'
+
+
+def test_blank_and_noise_patches_are_rejected(classifier: Classifier) -> None:
+    rng = np.random.default_rng(5)
+    patches = {
+        'uniform': np.full((120, 160), 128, np.uint8),
+        'noise': rng.integers(0, 256, (120, 160), dtype=np.uint8),
+        'texture': _background((120, 160), 9),
+    }
+    for name, frame in patches.items():
+        results = classifier.classify(frame, [_candidate(r) for r in (10.0, 16.0, 24.0)])
+        limits = [r.label for r in results if r.is_limit]
+        assert not limits, f'{name} patch read as {limits}'
+
+
+def test_one_result_per_candidate_in_order(classifier: Classifier) -> None:
+    frame = make_scene('30', 15.0, seed=2)
+    candidates = [_candidate(15.0), Candidate(10.0, 10.0, 8.0, 0.5),
+                  Candidate(-30.0, 500.0, 12.0, 0.1), Candidate(80.0, 60.0, 1.0, 0.1)]
+    results = classifier.classify(frame, candidates)
+    assert len(results) == 4
+    assert results[0].limit_kmh == 30
+    assert all(isinstance(r, Classification) for r in results)
+    assert results[3].label == LABEL_NO_SIGN  # radius below min_sign_radius_px
+    assert classifier.classify(frame, []) == ()
+
+
+@pytest.mark.parametrize('bad', [np.zeros((0, 0), np.uint8), np.zeros((20, 20, 3), np.uint8),
+                                 np.zeros((20, 20), np.float32), [[1, 2], [3, 4]]])
+def test_bad_images_raise_clear_errors(classifier: Classifier, bad: object) -> None:
+    with pytest.raises(ClassifierInputError) as info:
+        classifier.classify_crop(bad)  # type: ignore[arg-type]
+    assert isinstance(info.value, ValueError)
+    with pytest.raises(ClassifierInputError):
+        classifier.classify(bad, [_candidate(10.0)])  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize('shape', [(1, 1), (3, 4), (6, 6), (9, 30)])
+def test_tiny_crops_answer_no_sign(classifier: Classifier, shape: tuple[int, int]) -> None:
+    crop = np.random.default_rng(0).integers(0, 256, shape, dtype=np.uint8)
+    assert classifier.classify_crop(crop).label == LABEL_NO_SIGN
+
+
+def test_non_finite_candidates_answer_no_sign(classifier: Classifier) -> None:
+    frame = make_scene('30', 15.0)
+    for candidate in (Candidate(math.nan, 60.0, 15.0, 1.0), Candidate(80.0, 60.0, math.inf, 1.0)):
+        assert classifier.classify(frame, [candidate])[0].label == LABEL_NO_SIGN
+
+
+def test_classify_crop_on_a_gtsrb_like_crop(classifier: Classifier) -> None:
+    frame = make_scene('80', 15.0, seed=4, blur_px=0.7)
+    crop = frame[60 - 20:60 + 20, 80 - 20:80 + 20]  # sign 30 px, margin 5 px
+    result = classifier.classify_crop(np.ascontiguousarray(crop))
+    assert result.limit_kmh == 80
+    assert abs(result.x_px - 20.0) <= 2.0
+
+
+def test_banks_are_deterministic_and_cached(cache_dir: Path, classifier: Classifier) -> None:
+    config = dataclasses.replace(TEST_CONFIG, cache_dir=str(cache_dir))
+    cached = build_banks(config)  # read from the cache the fixture wrote
+    assert len(list(cache_dir.glob('filter_banks_*.npz'))) == 1
+    fresh = build_banks(dataclasses.replace(TEST_CONFIG, max_radius_px=18.0, cache_dir=""))
+    assert len(cached) == len(bank_radii(config)) == len(classifier.banks)
+    np.testing.assert_array_equal(cached[0].classification, classifier.banks[0].classification)
+    np.testing.assert_allclose(fresh[0].classification, cached[0].classification, rtol=1e-4,
+                               atol=1e-3 * float(np.abs(cached[0].classification).max()))
+    assert classifier.bank_nbytes > 0 and classifier.build_time_s >= 0.0
+
+
+def test_unwritable_cache_is_not_fatal(tmp_path: Path) -> None:
+    blocker = tmp_path / 'file'
+    blocker.write_text('not a folder')
+    config = dataclasses.replace(TEST_CONFIG, max_radius_px=17.0, cache_dir=str(blocker / "x"))
+    assert len(build_banks(config)) == len(bank_radii(config))

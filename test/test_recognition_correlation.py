@@ -1,0 +1,108 @@
+"""kth-law, MACE synthesis, FFT correlation and PSR on rendered templates."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from speed_sign_detector.recognition.correlation import (
+    correlate,
+    disc_window,
+    keep_inside,
+    kth_law,
+    peak_psr,
+    scene_spectrum,
+)
+from speed_sign_detector.recognition.mace import mace_filter, training_spectra
+from speed_sign_detector.recognition.templates import GRAY_TEMPLATE_GEOMETRY, gray_views
+
+FFT = (64, 64)
+VIEWS = [(yaw, pitch, 0.0) for yaw in (0, 10, -10, 20, -20, 30, -30) for pitch in (0, 10, -10)]
+
+
+def _views(kind: str) -> np.ndarray:
+    return gray_views(kind, 40.0, 52, VIEWS, geometry=GRAY_TEMPLATE_GEOMETRY, supersample=1)
+
+
+def _scene(kind: str, shift: tuple[int, int], yaw: float = 0.0) -> np.ndarray:
+    """64 x 64 gray scene with the sign's 52 px canvas at ``shift`` (top-left)."""
+    scene = np.full(FFT, 128.0, np.float32)
+    image = gray_views(kind, 40.0, 52, [(yaw, 0.0, 0.0)], geometry=GRAY_TEMPLATE_GEOMETRY)[0]
+    scene[shift[0]:shift[0] + 52, shift[1]:shift[1] + 52] = image
+    return scene
+
+
+@pytest.fixture(scope='module')
+def filter_50() -> np.ndarray:
+    return mace_filter(training_spectra(_views('50'), FFT, 0.3), FFT, noise_tradeoff=0.5)
+
+
+def test_kth_law_keeps_phase_and_compresses_magnitude() -> None:
+    rng = np.random.default_rng(1)
+    spectrum = (rng.normal(size=100) + 1j * rng.normal(size=100)) * 50
+    spectrum[0] = 0
+    out = kth_law(spectrum, 0.2)
+    nonzero = np.abs(spectrum) > 0
+    np.testing.assert_allclose(np.angle(out[nonzero]), np.angle(spectrum[nonzero]), atol=1e-4)
+    np.testing.assert_allclose(np.abs(out[nonzero]), np.abs(spectrum[nonzero]) ** 0.2,
+                               rtol=1e-4)
+    assert out[0] == 0
+
+
+def test_mace_meets_its_constraints() -> None:
+    """Every training image correlates to ~1 at the origin (k = 1, pure MACE)."""
+    images = _views('80')
+    spectra = training_spectra(images, FFT, 1.0)
+    filt = mace_filter(spectra, FFT, noise_tradeoff=0.0, ridge=1e-6)
+    origins = [correlate(spectra[i], filt.conj()[None], FFT)[0, 0, 0] for i in range(len(images))]
+    np.testing.assert_allclose(origins, 1.0, atol=1e-2)
+
+
+def test_psr_sharp_on_match_at_the_right_place(filter_50: np.ndarray) -> None:
+    scene = _scene('50', (5, 7), yaw=15.0)
+    planes = correlate(scene_spectrum(scene, FFT, 0.3), filter_50.conj()[None], FFT)
+    stats = peak_psr(planes, (6, 6), 4, 12, 2)
+    assert (int(stats.y[0]), int(stats.x[0])) == (5, 7)
+    assert stats.psr[0] > 15.0
+
+
+def test_psr_lower_on_other_signs_and_noise(filter_50: np.ndarray) -> None:
+    rng = np.random.default_rng(7)
+    psr = {}
+    for name, scene in (('50', _scene('50', (6, 6))), ('80', _scene('80', (6, 6))),
+                        ('no_overtaking', _scene('no_overtaking', (6, 6))),
+                        ('noise', rng.normal(128, 30, FFT).astype(np.float32))):
+        planes = correlate(scene_spectrum(scene, FFT, 0.3), filter_50.conj()[None], FFT)
+        psr[name] = float(peak_psr(planes, (6, 6), 4, 12, 2).psr[0])
+    assert psr['50'] > 1.5 * max(psr['80'], psr['no_overtaking']), psr
+    assert psr['noise'] < 0.5 * psr['50'], psr
+
+
+def test_batched_correlation_equals_one_by_one(filter_50: np.ndarray) -> None:
+    other = mace_filter(training_spectra(_views('30'), FFT, 0.3), FFT, noise_tradeoff=0.5)
+    bank = np.conj(np.stack([filter_50, other]))
+    spectrum = scene_spectrum(_scene('30', (6, 6)), FFT, 0.3)
+    batched = correlate(spectrum, bank, FFT)
+    for index in range(2):
+        single = correlate(spectrum, bank[index:index + 1], FFT)[0]
+        np.testing.assert_allclose(batched[index], single, atol=1e-5)
+
+
+def test_peak_psr_rejects_bad_windows() -> None:
+    with pytest.raises(ValueError):
+        peak_psr(np.zeros((1, 16, 16), np.float32), (8, 8), 2, 3, 3)
+
+
+def test_disc_window_and_keep_inside() -> None:
+    window = disc_window((21, 21), (10.5, 10.5), 5.0)
+    assert window[10, 10] == 1.0 and window[0, 0] == 0.0
+    assert window.sum() == pytest.approx(np.pi * 25, rel=0.05)
+    image = np.arange(21 * 21, dtype=np.float32).reshape(21, 21)
+    kept = keep_inside(image, window)
+    assert kept[10, 10] == image[10, 10]
+    inside_mean = (image * window).sum() / window.sum()
+    assert kept[0, 0] == pytest.approx(inside_mean)
+
+
+def test_training_spectra_rejects_empty_stack() -> None:
+    with pytest.raises(ValueError):
+        training_spectra(np.zeros((0, 8, 8), np.float32), (8, 8), 0.5)

@@ -1,0 +1,88 @@
+"""Sign rendering: every kind renders, shapes/types/alpha are right, proportions hold."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from speed_sign_detector.recognition.templates import (
+    GRAY_TEMPLATE_GEOMETRY,
+    SIGN_KINDS,
+    gray_template,
+    gray_views,
+    render_master,
+    render_sign,
+    views_from_master,
+)
+
+REQUIRED_KINDS = ([str(v) for v in (5, 10, 20, 30, 40, 50, 60, 70, 80, 90, 100, 110, 120, 130)]
+                  + ['00', 'end_of_limit_80', 'no_overtaking', 'no_entry', 'weight_limit',
+                     'width_limit', 'height_limit'])
+
+
+def test_sign_kinds_cover_the_contract() -> None:
+    missing = [kind for kind in REQUIRED_KINDS if kind not in SIGN_KINDS]
+    assert not missing, f'kinds missing from SIGN_KINDS: {missing}'
+    assert len(set(SIGN_KINDS)) == len(SIGN_KINDS)
+
+
+@pytest.mark.parametrize('kind', SIGN_KINDS)
+def test_every_kind_renders_with_disc_alpha(kind: str) -> None:
+    bgr, alpha = render_sign(kind, 48)
+    assert bgr.shape == (48, 48, 3) and bgr.dtype == np.uint8
+    assert alpha.shape == (48, 48) and alpha.dtype == np.float32
+    assert alpha[24, 24] == pytest.approx(1.0)
+    assert alpha[0, 0] == pytest.approx(0.0)
+    # the disc covers pi/4 of the square
+    assert alpha.mean() == pytest.approx(np.pi / 4, abs=0.02)
+    assert bgr[alpha == 0].max() == 0, 'colour outside the disc must be black (premultiplied)'
+
+
+def test_speed_limit_has_red_ring_white_field_black_digits() -> None:
+    bgr, _ = render_sign('50', 200)
+    g, r = bgr[..., 1].astype(int), bgr[..., 2].astype(int)
+    ring_x = 100 + 82  # 0.82 R right of the centre
+    assert r[100, ring_x] > 150 and g[100, ring_x] < 80, 'red ring expected'
+    field = bgr[42:56, 95:105]  # above the digits, inside the ring
+    assert field.mean() > 200, 'white field expected above the digits'
+    digits = bgr[70:130, 55:145].mean(axis=2)
+    assert (digits < 60).mean() > 0.1, 'black digits expected in the middle'
+
+
+def test_end_of_limit_has_no_red() -> None:
+    bgr, alpha = render_sign('end_of_limit_80', 120)
+    b, g, r = (bgr[..., i].astype(int) for i in range(3))
+    redness = (r - np.maximum(g, b))[alpha > 0.99]
+    assert redness.max() < 10
+
+
+def test_render_is_deterministic_and_small_sizes_are_antialiased() -> None:
+    first, _ = render_sign('120', 16)
+    second, _ = render_sign('120', 16)
+    np.testing.assert_array_equal(first, second)
+    levels = np.unique(first)
+    assert levels.size > 20, 'area reduction should give intermediate gray levels'
+
+
+@pytest.mark.parametrize('bad', [('70', 3), ('not_a_sign', 32)])
+def test_bad_arguments_raise_value_error(bad: tuple[str, int]) -> None:
+    with pytest.raises(ValueError):
+        render_sign(*bad)
+
+
+def test_gray_template_background_and_views() -> None:
+    template = gray_template('30', 40, 52, background=128.0)
+    assert template.shape == (52, 52) and template.dtype == np.float32
+    assert template[0, 0] == pytest.approx(128.0)
+    views = gray_views('30', 40, 52, [(0, 0, 0), (30, 0, 0), (0, 10, 6)])
+    assert views.shape == (3, 52, 52)
+    # yaw 30 deg narrows the sign horizontally: fewer non-background columns
+    def width(image: np.ndarray) -> int:
+        return int((np.abs(image - 128.0) > 20).any(axis=0).sum())
+    assert width(views[1]) < width(views[0]) - 2
+
+
+def test_master_views_match_gray_views() -> None:
+    master = render_master('80', 512, GRAY_TEMPLATE_GEOMETRY)
+    from_master = views_from_master(master, 30.0, 40, [(0, 0, 0)], supersample=4)
+    direct = gray_views('80', 30.0, 40, [(0, 0, 0)], geometry=GRAY_TEMPLATE_GEOMETRY)
+    assert np.abs(from_master - direct).mean() < 3.0
