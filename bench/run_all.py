@@ -149,7 +149,7 @@ class BenchSettings:
     out_dir: Path
     gtsdb_dir: Path = DATA_DIR / 'gtsdb-dev'
     gtsrb_dir: Path = DATA_DIR / 'gtsrb-dev'
-    detector_frames: int = 36
+    detector_frames: int = 30
     detector_sizes: tuple[str, ...] = tuple(size[0] for size in DETECTOR_SIZES)
     large_frames: int = 2
     sweep_frames: int = 3

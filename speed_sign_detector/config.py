@@ -100,7 +100,7 @@ class DetectorConfig:
     thin_edges: bool = setting(True, 'Keep only edge pixels that are local maxima of the '
                                'gradient magnitude along the gradient (non-maximum '
                                'suppression): thinner edges, fewer votes.')
-    edge_support: int = setting(0, 'An edge pixel votes only when at least this many of '
+    edge_support: int = setting(1, 'An edge pixel votes only when at least this many of '
                                 'its 8 neighbours are edge pixels with a gradient direction '
                                 'within 30 degrees (contours, not isolated texture).',
                                 low=0, high=8)
@@ -108,18 +108,24 @@ class DetectorConfig:
                                          'level (2x2 box averages) on which its smallest '
                                          'radius still spans this many level pixels.',
                                          low=1.0, high=100.0)
-    max_pyramid_level: int = setting(3, 'Coarsest pyramid level used for voting (0 = vote '
+    max_pyramid_level: int = setting(2, 'Coarsest pyramid level used for voting (0 = vote '
                                      'at full resolution only).', low=0, high=6)
-    vote_pixels_per_radius: float = setting(3.0, 'A band votes into an image (a pyramid '
+    vote_pixels_per_radius: float = setting(1.75, 'A band votes into an image (a pyramid '
                                             'level at least as coarse as its edges) whose '
                                             'pixel is at most its smallest radius / this: '
                                             'coarser vote images for large radii, fewer '
                                             'fragments; centres are refined to sub-pixel. '
                                             '0 = vote at the edge level.',
                                             low=0.0, high=100.0)
+    voting_edge_radius_ratio: float = setting(0.66, 'Radius of the edge that votes (with '
+                                              'bright_inside: the inner edge of the red '
+                                              'ring) over the sign\'s outer radius (StVO: '
+                                              '0.66); candidates report the voting radius '
+                                              '/ this, i.e. the outer radius.', low=0.1,
+                                              high=1.0)
     suppression_factor: float = setting(1.0, 'Non-maximum suppression: a candidate closer '
-                                        'than this many radii (the larger of the two) to a '
-                                        'better one is the same sign and dropped.',
+                                        'than this many voting radii (the larger of the '
+                                        'two) to a better one is the same sign and dropped.',
                                         low=0.0, high=10.0)
 
     def __post_init__(self) -> None:
@@ -160,7 +166,15 @@ class ClassifierConfig:
     canvas_margin: float = setting(0.15, 'Gray template border around the sign, as a '
                                    'fraction of its diameter on each side.', low=0.0,
                                    high=1.0)
-    size_search_ratio: float = setting(1.45, 'Detection filters searched: radii within this '
+    max_cut_fraction: float = setting(0.2, 'A sign whose disc reaches beyond the frame '
+                                      'border by more than this fraction of its radius is '
+                                      'answered "no sign": its digits are cut off.',
+                                      low=0.0, high=2.0)
+    candidate_radius_scale: float = setting(1.33, 'Candidate radii are multiplied by this '
+                                            'before the size search: the radial-symmetry '
+                                            'detector reports about 0.75 of the outer '
+                                            'radius (GTSDB, median).', low=0.2, high=5.0)
+    size_search_ratio: float = setting(1.3, 'Detection filters searched: radii within this '
                                        'factor of the candidate radius.', low=1.0, high=4.0)
     position_search: float = setting(0.35, 'Peak search half-width around the candidate '
                                      'centre, as a fraction of its radius.', low=0.0,

@@ -7,13 +7,12 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from test_detection_synthetic import ring_frame
 
 from speed_sign_detector.config import DetectorConfig
 from speed_sign_detector.detection.candidates import Candidate
 from speed_sign_detector.detection.detector import Detector
 from speed_sign_detector.detection.voting_numpy import compute_edges
-
-from test_detection_synthetic import ring_frame
 
 CONFIGS = {
     'default': DetectorConfig(),

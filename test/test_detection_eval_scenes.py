@@ -8,14 +8,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from test_detection_synthetic import ring_frame
 
 from speed_sign_detector.config import DetectorConfig
 from speed_sign_detector.detection.candidates import Candidate
 from speed_sign_detector.detection.detector import Detector
 from speed_sign_detector.tools import eval as eval_tool
 from speed_sign_detector.tools.eval_scenes import SceneSign, is_found, read_gtsdb_truth
-
-from test_detection_synthetic import ring_frame
 
 KEYS = {'frames', 'signs', 'candidate_recall', 'ms_per_frame', 'detector_ms_per_frame',
         'backend'}
@@ -52,6 +51,8 @@ def test_synthetic_scenes(tmp_path: Path, capsys: pytest.CaptureFixture[str]) ->
     assert result['frames'] == 2 and result['signs'] == 2
     assert result['candidate_recall'] == 1.0 and result['backend'] == 'gl'
     assert result['ms_per_frame'] >= result['detector_ms_per_frame'] > 0.0
+    # the white disc (0.8 r) votes; candidates report it as the outer radius (/ 0.66)
+    assert result['radius_ratio_median'] == pytest.approx(0.8 / 0.66, rel=0.15)
     assert eval_tool.main(['scenes', str(tmp_path), '--backend', 'numpy']) == 0
     table = capsys.readouterr().out
     assert 'candidate recall' in table and 'numpy' in table

@@ -80,7 +80,9 @@ def make_scene(kind: str, radius_px: float, *, yaw_deg: float = 0.0, roll_deg: f
 
 
 def _candidate(radius_px: float, error_px: float = 0.0) -> Candidate:
-    return Candidate(80.0 + error_px, 60.0 - error_px, radius_px * 1.08, 1.0)
+    """A candidate like the radial-symmetry detector gives: ~0.75 of the outer radius
+    (undone by ClassifierConfig.candidate_radius_scale)."""
+    return Candidate(80.0 + error_px, 60.0 - error_px, radius_px * 0.78, 1.0)
 
 
 DISTORTIONS = {
@@ -120,7 +122,7 @@ def test_every_limit_value_reads_clean(classifier: Classifier) -> None:
 
 def test_result_fields_locate_and_size_the_sign(classifier: Classifier) -> None:
     frame = make_scene('70', 18.0, roll_deg=6.0, seed=3)
-    result = classifier.classify(frame, [Candidate(82.0, 58.0, 15.0, 1.0)])[0]
+    result = classifier.classify(frame, [Candidate(82.0, 58.0, 13.0, 1.0)])[0]
     assert result.label == '70' and result.limit_kmh == 70 and result.is_limit
     assert abs(result.x_px - 80.0) <= 2.0 and abs(result.y_px - 60.0) <= 2.0
     assert result.radius_px == pytest.approx(18.0, rel=0.2)
@@ -132,7 +134,7 @@ def test_small_and_large_signs_are_rescaled(classifier: Classifier) -> None:
     small = make_scene('50', 9.0, seed=11)
     large = make_scene('50', 40.0, seed=12, shape=(200, 240), centre=(120.0, 100.0))
     assert classifier.classify(small, [_candidate(9.0)])[0].limit_kmh == 50
-    result = classifier.classify(large, [Candidate(120.0, 100.0, 42.0, 1.0)])[0]
+    result = classifier.classify(large, [Candidate(120.0, 100.0, 31.0, 1.0)])[0]
     assert result.limit_kmh == 50
     assert result.radius_px == pytest.approx(40.0, rel=0.2)
 
@@ -219,3 +221,16 @@ def test_unwritable_cache_is_not_fatal(tmp_path: Path) -> None:
     blocker.write_text('not a folder')
     config = dataclasses.replace(TEST_CONFIG, max_radius_px=17.0, cache_dir=str(blocker / "x"))
     assert len(build_banks(config)) == len(bank_radii(config))
+
+
+@pytest.mark.parametrize('centre', [(150.0, 60.0), (80.0, 5.0), (3.0, 110.0)])
+def test_sign_cut_by_the_frame_border_is_not_read(classifier: Classifier,
+                                                  centre: tuple[float, float]) -> None:
+    """A near sign leaving the frame shows only part of its digits: answer no sign."""
+    radius = 22.0
+    cut = make_scene('80', radius, centre=centre)
+    answer = classifier.classify(cut, [Candidate(centre[0], centre[1], radius / 1.33, 1.0)])[0]
+    assert answer.label == LABEL_NO_SIGN
+    inside = make_scene('80', radius, centre=(80.0, 60.0))
+    answer = classifier.classify(inside, [Candidate(80.0, 60.0, radius / 1.33, 1.0)])[0]
+    assert answer.label == '80'

@@ -67,7 +67,7 @@ def bags(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     return paths
 
 
-@pytest.mark.parametrize('encoding', ['', '_jpeg'])
+@pytest.mark.parametrize('encoding', ['', '_jpeg'], ids=['raw', 'jpeg'])
 def test_ros1_messages_convert_to_the_same_ros2_messages(bags: dict[str, Path],
                                                          encoding: str) -> None:
     message_class = CompressedImage if encoding else Image

@@ -106,12 +106,10 @@ def block_maxima(votes: Sequence[np.ndarray], bands: Sequence[RadiusBand],
         qy = block_rows * step + arg[better] // step
         qx = block_cols * step + arg[better] % step
         centre = score[qy, qx]
-
-        def clamped(yy: np.ndarray, xx: np.ndarray) -> np.ndarray:
-            return score[np.clip(yy, 0, level_height - 1), np.clip(xx, 0, level_width - 1)]
-
-        offset_x = _parabola_offset(clamped(qy, qx - 1), centre, clamped(qy, qx + 1))
-        offset_y = _parabola_offset(clamped(qy - 1, qx), centre, clamped(qy + 1, qx))
+        offset_x = _parabola_offset(_clamped(score, qy, qx - 1), centre,
+                                    _clamped(score, qy, qx + 1))
+        offset_y = _parabola_offset(_clamped(score, qy - 1, qx), centre,
+                                    _clamped(score, qy + 1, qx))
         half_step = 0.5 * (band.target_scale - 1)
         best[better] = centre
         x_px[better] = band.target_scale * (qx + offset_x) + half_step
@@ -119,6 +117,11 @@ def block_maxima(votes: Sequence[np.ndarray], bands: Sequence[RadiusBand],
         radius_px[better] = image[qy, qx, 1] / image[qy, qx, 0] * band.scale
         band_index[better] = band.index
     return BlockMaxima(best, x_px, y_px, radius_px, band_index)
+
+
+def _clamped(image: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """``image[rows, cols]`` with indices clamped to the image (edge pixels repeat)."""
+    return image[np.clip(rows, 0, image.shape[0] - 1), np.clip(cols, 0, image.shape[1] - 1)]
 
 
 def _parabola_offset(minus: np.ndarray, centre: np.ndarray, plus: np.ndarray) -> np.ndarray:

@@ -8,17 +8,30 @@ when no OpenGL context can be created (the reason is logged and kept in
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 from types import TracebackType
+from typing import Self
 
 import numpy as np
 
 from speed_sign_detector.config import DetectorConfig
 from speed_sign_detector.detection.candidates import (
-    BlockMaxima, Candidate, block_maxima, score_normaliser, select_candidates)
+    BlockMaxima,
+    Candidate,
+    band_scores,
+    block_maxima,
+    score_normaliser,
+    select_candidates,
+)
 from speed_sign_detector.detection.gradients import validate_frame
 from speed_sign_detector.detection.voting_numpy import (
-    RadiusBand, min_frame_size_px, plan_bands, vote_images, vote_signs)
+    RadiusBand,
+    min_frame_size_px,
+    plan_bands,
+    vote_images,
+    vote_signs,
+)
 from speed_sign_detector.errors import ConfigError, DetectorError
 
 LOGGER = logging.getLogger(__name__)
@@ -47,7 +60,8 @@ class Detector:
     :meth:`close` (or use ``with``) to release it.
     """
 
-    def __init__(self, config: DetectorConfig = DetectorConfig(), backend: str = 'auto') -> None:
+    def __init__(self, config: DetectorConfig = DetectorConfig(),  # noqa: B008 (frozen)
+                 backend: str = 'auto') -> None:
         if backend not in BACKENDS:
             raise ConfigError(f'unknown detector backend {backend!r}; use one of '
                               f'{", ".join(BACKENDS)}')
@@ -83,16 +97,23 @@ class Detector:
     def detect(self, gray: np.ndarray) -> tuple[Candidate, ...]:
         """Candidates of one (H, W) uint8 frame, best first (at most max_candidates).
 
+        ``radius_px`` is the sign's outer radius: the voting radius (harmonic mean voting
+        distance) divided by ``config.voting_edge_radius_ratio``.
+
         Raises:
             InvalidFrameError (a ValueError): unusable frame.
             DetectorError: the detector is closed.
         """
         maxima = self.block_maxima(gray)
-        return select_candidates(maxima, self.config.max_candidates, self.config.min_score,
-                                 self.config.suppression_factor)
+        candidates = select_candidates(maxima, self.config.max_candidates,
+                                       self.config.min_score, self.config.suppression_factor)
+        ratio = self.config.voting_edge_radius_ratio
+        return tuple(dataclasses.replace(candidate, radius_px=candidate.radius_px / ratio)
+                     for candidate in candidates)
 
     def block_maxima(self, gray: np.ndarray) -> BlockMaxima:
-        """The per-block best vote pixels of a frame (before top-N selection)."""
+        """The per-block best vote pixels of a frame (before top-N selection; radii are
+        voting radii)."""
         frame = self._check(gray)
         if self._gl is not None:
             return self._gl.block_maxima(frame)
@@ -111,6 +132,26 @@ class Detector:
             return self._gl.vote_images(frame)
         return vote_images(frame, self.config)
 
+    def score_map(self, gray: np.ndarray) -> np.ndarray:
+        """Full-resolution picture of the votes: (H, W) float32, best band score per pixel.
+
+        Each band's score image (about the fraction of a complete circle that voted,
+        see :func:`.candidates.band_scores`) is enlarged to the frame size (each vote pixel
+        covers ``band.target_scale`` pixels) and the maximum over bands is kept. Meant for
+        debug pictures and the demo; :meth:`detect` does not need it.
+        """
+        frame = self._check(gray)
+        height, width = frame.shape
+        combined = np.zeros((height, width), np.float32)
+        for band, votes, normaliser in zip(self.bands, self.vote_images(frame),
+                                           self.score_normalisers):
+            score = band_scores(votes, normaliser)
+            scale = band.target_scale
+            enlarged = np.repeat(np.repeat(score, scale, axis=0), scale, axis=1)
+            combined[:enlarged.shape[0], :enlarged.shape[1]] = np.maximum(
+                combined[:enlarged.shape[0], :enlarged.shape[1]], enlarged[:height, :width])
+        return combined
+
     def close(self) -> None:
         """Release the GL context (idempotent)."""
         if self._gl is not None:
@@ -122,7 +163,7 @@ class Detector:
         """True after :meth:`close`."""
         return self._closed
 
-    def __enter__(self) -> Detector:
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,

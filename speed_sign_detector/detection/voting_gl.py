@@ -2,18 +2,22 @@
 
 The same maths as :mod:`speed_sign_detector.detection.voting_numpy`, kept on the GPU:
 
-1. the frame is uploaded once as an R8UI texture;
-2. compute shaders build the float pyramid, the Sobel gradients of each level and,
-   per level, an edge list (SSBO) appended with ``atomicAdd`` on the ``instanceCount`` of
-   that level's indirect draw command, so the CPU never sees the edges;
-3. one instanced indirect draw per radius band: the vertex shader reads edge
-   ``gl_InstanceID`` and emits its trapezoid (two triangles, four with polarity
-   ``both``); the fragment shader adds ``1 / u`` into the direction-sector channel and 1
-   into the count channel (additive blending into float32 targets: two RGBA32F for the
-   eight sectors, one R32F for the count);
+1. the frame is uploaded once as an R8UI texture; a compute shader maps it through the
+   contrast table (linear or log) into level 0 of a float pyramid (2x2 box averages);
+2. per pyramid level, compute shaders take the 3x3 Sobel gradient, mark edge pixels
+   (threshold, non-maximum suppression, neighbour support) and append them to an edge
+   list (SSBO) with ``atomicAdd`` on the vertex count of that level's indirect draw
+   command, so the CPU never sees the edges;
+3. one indirect draw per group of radius bands (two bands sharing edge and vote levels
+   share an RGBA32F target: RG for the first, BA for the second): the vertex shader reads
+   edge ``gl_VertexID / 3`` and emits its vote triangle (apex at the edge pixel, far side
+   at the band group's largest radius, half-width ``r tan(pi/8)``); the fragment shader
+   drops votes nearer than the smallest radius (so each band gets the trapezoid of the
+   paper) and adds ``(profile / u, profile)`` into the band's channels with additive
+   blending; bands that vote toward both sides draw twice;
 4. a compute shader scores every vote pixel and keeps, per 8x8 full-resolution block,
-   the best pixel over all bands (with a sub-pixel parabola fit), so only
-   ``blocks x 8`` floats are read back.
+   the best pixel over all bands (with a sub-pixel parabola fit); only that block list
+   (``blocks x 32`` bytes) is read back for the top-N selection.
 
 One moderngl context per :class:`GLVoter`, created in its constructor and used on that
 thread only; :meth:`GLVoter.close` releases it. Per-size resources are rebuilt when the
@@ -22,6 +26,7 @@ frame size changes.
 from __future__ import annotations
 
 import math
+import threading
 import time
 from dataclasses import dataclass
 
@@ -29,9 +34,16 @@ import numpy as np
 
 from speed_sign_detector.config import DetectorConfig
 from speed_sign_detector.detection.candidates import BlockMaxima, score_normaliser
-from speed_sign_detector.detection.gradients import gray_lookup
+from speed_sign_detector.detection.gradients import SUPPORT_ANGLE_DEG, gray_lookup
 from speed_sign_detector.detection.voting_numpy import (
-    CHANNELS, SPREAD, SUPPORT_ANGLE_DEG, RadiusBand, level_size, plan_bands, pyramid_levels, vote_signs)
+    CHANNELS,
+    SPREAD,
+    RadiusBand,
+    level_size,
+    plan_bands,
+    pyramid_levels,
+    vote_signs,
+)
 from speed_sign_detector.errors import DetectorError
 
 _GROUP = 8
@@ -335,6 +347,7 @@ class GLVoter:
             raise DetectorError(f'GL voting shaders failed to build: {err}') from err
         self._convert['lookup'].write(gray_lookup(config.contrast,
                                                   config.log_offset_gray).tobytes())
+        self._thread_id = threading.get_ident()
         self._size: tuple[int, int] | None = None
         self._frame = None
         self._levels: list[_LevelResources] = []
@@ -367,16 +380,19 @@ class GLVoter:
         """Release every GPU object and the context (idempotent)."""
         if self._released:
             return
-        self._release_size_resources()
+        with self._ctx:
+            self._release_size_resources()
         self._ctx.release()
         self._released = True
 
     def block_maxima(self, gray: np.ndarray) -> BlockMaxima:
         """Vote on a validated (H, W) uint8 frame; per-block best pixels (see candidates)."""
-        self._run_votes(gray)
-        self._reduce_blocks()
-        raw = np.frombuffer(self._blocks.read(), dtype=np.float32).reshape(-1, 8)
-        self._stage('readback')
+        self._check_thread()
+        with self._ctx:  # current on this thread (other detectors may have their own)
+            self._run_votes(gray)
+            self._reduce_blocks()
+            raw = np.frombuffer(self._blocks.read(), dtype=np.float32).reshape(-1, 8)
+            self._stage('readback')
         rows, cols = self._blocks_shape
         return BlockMaxima(score=raw[:, 0].reshape(rows, cols).copy(),
                            x_px=raw[:, 1].reshape(rows, cols).copy(),
@@ -386,20 +402,24 @@ class GLVoter:
 
     def vote_images(self, gray: np.ndarray) -> list[np.ndarray]:
         """Vote images of every band, (H_level, W_level, CHANNELS) float32 each."""
-        self._run_votes(gray)
+        self._check_thread()
         images = []
-        for group in self._groups:
-            width, height = group.target.size
-            pixels = np.frombuffer(group.target.read(), np.float32).reshape(height, width, 4)
-            for slot in range(len(group.bands)):
-                images.append(pixels[..., CHANNELS * slot:CHANNELS * (slot + 1)].copy())
+        with self._ctx:
+            self._run_votes(gray)
+            for group in self._groups:
+                width, height = group.target.size
+                pixels = np.frombuffer(group.target.read(), np.float32).reshape(height, width,
+                                                                                4)
+                for slot in range(len(group.bands)):
+                    images.append(pixels[..., CHANNELS * slot:CHANNELS * (slot + 1)].copy())
         return images
 
     def edge_counts(self) -> list[int]:
         """Edge pixels per pyramid level of the last frame (reads 16 bytes per level)."""
-        per_edge = _VERTICES_PER_EDGE
-        return [int(np.frombuffer(level.command.read(), np.uint32)[0]) // per_edge
-                for level in self._levels]
+        self._check_thread()
+        with self._ctx:
+            return [int(np.frombuffer(level.command.read(), np.uint32)[0]) // _VERTICES_PER_EDGE
+                    for level in self._levels]
 
     # -- internals ---------------------------------------------------------------------
 
@@ -444,9 +464,14 @@ class GLVoter:
         self._levels, self._groups = [], []
         self._size = None
 
-    def _run_votes(self, gray: np.ndarray) -> None:
+    def _check_thread(self) -> None:
         if self._released:
             raise DetectorError('the GL detector has been closed')
+        if threading.get_ident() != self._thread_id:
+            raise DetectorError('the GL detector must be used on the thread that created it '
+                                '(its OpenGL context is current there only)')
+
+    def _run_votes(self, gray: np.ndarray) -> None:
         height, width = gray.shape
         self._stage(None)
         self._ensure_size(width, height)
@@ -541,4 +566,4 @@ class GLVoter:
 
 
 def _groups(extent: int) -> int:
-    return int(math.ceil(extent / _GROUP))
+    return math.ceil(extent / _GROUP)

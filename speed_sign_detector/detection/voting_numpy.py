@@ -4,24 +4,26 @@ Every edge pixel votes along its gradient for centres at distances ``r0 .. r1`` 
 radius band, spread perpendicular to the gradient by ``+/- r tan(pi/8)`` (the octagon
 approximation of a circle), i.e. it "draws" a trapezoid with corners
 ``p + r0 (g +/- t n)`` and ``p + r1 (g +/- t n)``. A pixel receives the vote when its
-centre lies inside the trapezoid (the rasterization rule of the GL backend, which
-draws the same trapezoids as two triangles with additive blending).
+centre lies inside the trapezoid (the rasterization rule of the GL backend, which draws
+the triangle ``p, p + r1 (g +/- t n)`` and discards fragments nearer than ``r0``).
 
-Each vote of an edge pixel at distance ``u`` (along the gradient) weighs ``1 / u``: a
-complete circle of radius ``R`` then gives its centre ``2 pi`` whatever ``R`` is (its
-``2 pi R`` edge pixels each add ``1 / R``), so radius bands compete fairly.
+A vote at distance ``u`` along the gradient and ``v`` across it weighs
+``profile / u`` with ``profile = 1 - |v| / (t u)`` (``vote_profile='tent'``; 1 with
+``'flat'``, the paper's uniform spread). ``1 / u``: a complete circle of radius ``R``
+gives its centre ``2 pi`` whatever ``R`` is (its ``2 pi R`` edge pixels each add
+``1 / R``), so radius bands compete fairly. The tent: on the gradient line the weight
+is full, so the votes of a circle pile up in a sharp peak at its centre instead of a
+plateau as wide as the band (where ``1 / u`` would even favour the plateau's rim).
 
 Radius bands are geometric between ``min_radius_px`` and ``max_radius_px``; band ``b``
 votes on the coarsest pyramid level on which its smallest radius is still at least
 ``level_min_radius_px`` level pixels (fewer edges, 4x fewer fragments per octave).
 
-The vote image of one band has ``__all__ = ['CHANNELS', 'SPREAD', 'SUPPORT_ANGLE_DEG', 'RadiusBand', 'plan_bands', 'vote_images']
-
-CHANNELS = 2`` channels per pixel: ``(sum w, n)`` over
-the ``n`` votes it received; ``n / sum w`` is the harmonic mean voting distance, the
-radius estimate. (A direction-balance term, the resultant of the vote directions, was
-tried and lowered recall on GTSDB: isotropic clutter such as foliage votes from all
-sides too.)
+The vote image of one band has ``CHANNELS = 2`` channels per pixel:
+``(sum profile / u, sum profile)`` over the votes it received; their ratio is the
+(profile-weighted) harmonic mean voting distance, the radius estimate. (A
+direction-balance term, the resultant of the vote directions, was tried and lowered
+recall on GTSDB: isotropic clutter such as foliage votes from all sides too.)
 """
 from __future__ import annotations
 
@@ -32,12 +34,14 @@ import numpy as np
 
 from speed_sign_detector.config import DetectorConfig
 from speed_sign_detector.detection.gradients import (
-    SUPPORT_ANGLE_DEG, EdgeList, build_pyramid, extract_edges, gray_lookup)
-
-__all__ = ['CHANNELS', 'SPREAD', 'SUPPORT_ANGLE_DEG', 'RadiusBand', 'plan_bands', 'vote_images']
+    EdgeList,
+    build_pyramid,
+    extract_edges,
+    gray_lookup,
+)
 
 CHANNELS = 2
-"""Channels of a band's vote image: ``(sum w, vote count)``."""
+"""Channels of a band's vote image: ``(sum profile / u, sum profile)``."""
 SPREAD = math.tan(math.pi / 8.0)
 """Half-width of the vote spread per unit distance (octagon, n = 8)."""
 
@@ -105,7 +109,7 @@ def min_frame_size_px(config: DetectorConfig) -> int:
     """Smallest frame side the detector accepts: one voting window (2 max radii + 3)."""
     bands = plan_bands(config)
     coarsest = max(band.target_level for band in bands)
-    return max(int(math.ceil(2.0 * config.max_radius_px)) + 3, 3 << coarsest)
+    return max(math.ceil(2.0 * config.max_radius_px) + 3, 3 << coarsest)
 
 
 def pyramid_levels(bands: tuple[RadiusBand, ...]) -> int:

@@ -390,7 +390,9 @@ class Classifier:
                 2-D uint8 array.
         """
         gray = _check_gray(gray, 'gray')
-        return tuple(self._classify_at(gray, c.x_px, c.y_px, c.radius_px) for c in candidates)
+        scale = self.config.candidate_radius_scale
+        return tuple(self._classify_at(gray, c.x_px, c.y_px, c.radius_px * scale)
+                     for c in candidates)
 
     def classify_crop(self, crop: np.ndarray) -> Classification:
         """Classify a crop holding one centred sign.
@@ -530,7 +532,10 @@ class Classifier:
         frame_x = x_px + (roi_x - largest / 2.0) / scale
         frame_y = y_px + (roi_y - largest / 2.0) / scale
         size_radius /= scale
-        if winner_psr < config.psr_threshold or (label.isdigit() and margin < config.min_margin):
+        height, width = gray.shape
+        cut_px = max(-frame_x, -frame_y, frame_x - (width - 1), frame_y - (height - 1)) + size_radius
+        if (winner_psr < config.psr_threshold or (label.isdigit() and margin < config.min_margin)
+                or cut_px > config.max_cut_fraction * size_radius):
             return Classification(LABEL_NO_SIGN, None, winner_psr, size_radius, roll, margin,
                                   frame_x, frame_y)
         return Classification(label, int(label) if label.isdigit() else None, winner_psr,

@@ -9,7 +9,9 @@ candidates has its centre within ``max(3 px, 0.35 r)`` of the box centre, with
 Output (``--json``: one JSON object as the last stdout line): ``frames``, ``signs``,
 ``found``, ``candidate_recall``, ``ms_per_frame`` (everything per frame: reading,
 conversion, detection, scoring), ``detector_ms_per_frame`` (``Detector.detect`` alone),
-``backend``, ``renderer``, ``max_candidates``, ``recall_by_size`` (per sign radius range).
+``backend``, ``renderer``, ``max_candidates``, ``recall_by_size`` (per sign radius range),
+``radius_ratio_median`` (candidate radius / box radius over the found signs: the
+detector reports the radius of the edge that voted, mostly the inner edge of the ring).
 """
 from __future__ import annotations
 
@@ -18,6 +20,7 @@ import dataclasses
 import json
 import logging
 import math
+import statistics
 import sys
 import time
 from collections.abc import Sequence
@@ -103,11 +106,17 @@ def read_gtsdb_truth(path: Path) -> dict[str, list[SceneSign]]:
     return signs
 
 
-def is_found(sign: SceneSign, candidates: Sequence[Candidate]) -> bool:
-    """True when a candidate centre lies within ``max(3, 0.35 r)`` px of the sign's centre."""
+def matching_candidate(sign: SceneSign, candidates: Sequence[Candidate]) -> Candidate | None:
+    """The best candidate whose centre lies within ``max(3, 0.35 r)`` px of the sign's centre."""
     x, y = sign.centre_px
     tolerance = max(3.0, 0.35 * sign.radius_px)
-    return any(math.hypot(c.x_px - x, c.y_px - y) <= tolerance for c in candidates)
+    return next((c for c in candidates if math.hypot(c.x_px - x, c.y_px - y) <= tolerance),
+                None)
+
+
+def is_found(sign: SceneSign, candidates: Sequence[Candidate]) -> bool:
+    """True when a candidate centre lies within ``max(3, 0.35 r)`` px of the sign's centre."""
+    return matching_candidate(sign, candidates) is not None
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -147,6 +156,7 @@ def run(args: argparse.Namespace) -> int:
     bins_total = [0] * len(SIZE_BINS_PX)
     bins_found = [0] * len(SIZE_BINS_PX)
     detector_s = 0.0
+    radius_ratios: list[float] = []
     start = time.perf_counter()
     with Detector(config, backend=args.backend) as detector:
         for index, name in enumerate(files):
@@ -159,7 +169,10 @@ def run(args: argparse.Namespace) -> int:
             for sign in truth.get(name, ()):
                 if not sign.limit_kmh:
                     continue
-                hit = is_found(sign, candidates)
+                match = matching_candidate(sign, candidates)
+                hit = match is not None
+                if hit:
+                    radius_ratios.append(match.radius_px / sign.radius_px)
                 signs += 1
                 found += hit
                 for bin_index, (low, high) in enumerate(SIZE_BINS_PX):
@@ -181,6 +194,7 @@ def run(args: argparse.Namespace) -> int:
         'backend': backend,
         'renderer': renderer,
         'max_candidates': config.max_candidates,
+        'radius_ratio_median': (statistics.median(radius_ratios) if radius_ratios else None),
         'recall_by_size': {f'{low:g}-{high:g}px': {
             'signs': total, 'recall': (hits / total if total else None)}
             for (low, high), total, hits in zip(SIZE_BINS_PX, bins_total, bins_found)},
@@ -201,6 +215,8 @@ def _print_table(result: dict) -> None:
     print(f"{'found / signs':<28}{str(result['found']) + '/' + str(result['signs']):>12}")
     print(f"{'ms per frame':<28}{result['ms_per_frame']:>12.1f}")
     print(f"{'detector ms per frame':<28}{result['detector_ms_per_frame']:>12.1f}")
+    if result['radius_ratio_median'] is not None:
+        print(f"{'radius ratio (median)':<28}{result['radius_ratio_median']:>12.2f}")
     for name, item in result['recall_by_size'].items():
         recall = '-' if item['recall'] is None else f"{item['recall']:.3f}"
         print(f"{'recall, radius ' + name:<28}{recall:>12}  ({item['signs']} signs)")
