@@ -24,9 +24,17 @@ demo: $(INSTALLED)
 		--out $(OUT)/demo/results --contact-sheet $(OUT)/demo/contact_sheet.png
 	@echo "results bag: $(OUT)/demo/results   picture: $(OUT)/demo/contact_sheet.png"
 
-## live-demo: node + bag replay + monitor over DDS, all in one command
+## live-demo: node + bag replay + monitor over DDS (real rclpy, Fast DDS), in one command
 live-demo: $(INSTALLED)
-	$(BIN)/python -m speed_sign_detector.tools.demo --live --out $(OUT)/live-demo
+	rm -rf $(OUT)/live-demo && mkdir -p $(OUT)/live-demo
+	$(BIN)/speed_sign_synth $(OUT)/live-demo/drive --seed 3 --duration 15 --compressed
+	@set -e; \
+	$(BIN)/speed_sign_detector --ros-args -r image/compressed:=/camera/image_raw/compressed & \
+	node=$$!; trap 'kill -INT $$node $$monitor 2>/dev/null; wait $$node' EXIT; \
+	$(BIN)/speed_sign_monitor --timeout 120 & monitor=$$!; \
+	$(BIN)/speed_sign_replay $(OUT)/live-demo/drive --restamp --wait 120 -q; \
+	sleep 2; kill -INT $$monitor; wait $$monitor || true; \
+	echo; echo "final state:"; $(BIN)/speed_sign_monitor --once --json --timeout 10
 
 ## test: the test suite (what .ci/run runs)
 test: $(INSTALLED)

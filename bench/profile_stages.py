@@ -26,14 +26,14 @@ BENCH_DIR = Path(__file__).resolve().parent
 if str(BENCH_DIR) not in sys.path:
     sys.path.insert(0, str(BENCH_DIR))
 
-import bench_classifier  # noqa: E402,F401  (run_all imports it too)
-import run_all  # noqa: E402
+import bench_classifier  # noqa: F401  (run_all imports it too)
+import run_all
 
-from speed_sign_detector.config import DetectorConfig  # noqa: E402
-from speed_sign_detector.detection.detector import Detector  # noqa: E402
-from speed_sign_detector.recognition.classifier import Classifier  # noqa: E402
-from speed_sign_detector.tools.eval_crops import read_labels  # noqa: E402
-from speed_sign_detector.tools.eval_scenes import read_gtsdb_truth  # noqa: E402
+from speed_sign_detector.config import DetectorConfig
+from speed_sign_detector.detection.detector import Detector
+from speed_sign_detector.recognition.classifier import Classifier
+from speed_sign_detector.tools.eval_crops import read_labels
+from speed_sign_detector.tools.eval_scenes import read_gtsdb_truth
 
 
 def _print(profile: cProfile.Profile, lines: int) -> None:

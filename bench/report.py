@@ -67,9 +67,9 @@ def _failed(section: Any) -> str | None:
 
 def _detector_lines(detector: Mapping[str, Any]) -> list[str]:
     sizes: Mapping[str, Any] = detector['sizes']
-    lines = [f"Detector stage: GTSDB-dev scenes holding a speed-limit sign "
-             f"({detector['frames_available']} available), top-{detector['top_n']} "
-             f"candidates; recall = a candidate centre within max(3, 0.35 r) px of the sign",
+    lines = [(f"Detector stage: GTSDB-dev scenes holding a speed-limit sign "
+              f"({detector['frames_available']} available), top-{detector['top_n']} "
+              f"candidates; recall = a candidate centre within max(3, 0.35 r) px of the sign"),
              f"GL renderer: {detector['renderer']}"]
     header = f"{'method':<24}"
     for name, size in sizes.items():
@@ -89,12 +89,25 @@ def _detector_lines(detector: Mapping[str, Any]) -> list[str]:
         + (f" ({size['signs']})" if size['signs'] is not None else ' (time only)')
         for name, size in sizes.items()))
     for name, size in sizes.items():
-        gl_ms = size['methods']['gl']['median_ms']
-        peer = size['fastest_peer']
-        peer_ms = size['methods'][peer]['median_ms']
-        lines.append(f"  {name}: GL {_number(gl_ms)} ms vs fastest peer "
-                     f"{METHOD_LABELS.get(peer, peer)} {_number(peer_ms)} ms "
-                     f"-> GL is {peer_ms / gl_ms:.2f}x the peer's speed")
+        rows = size['methods']
+        gl = rows['gl']
+        peers = [m for m in rows if m not in ('gl', 'numpy')]
+        fastest = min(peers, key=lambda m: rows[m]['median_ms'])
+        text = (f"  {name}: GL {_number(gl['median_ms'])} ms; fastest peer "
+                f"{METHOD_LABELS.get(fastest, fastest)} {_number(rows[fastest]['median_ms'])} "
+                f"ms (GL {rows[fastest]['median_ms'] / gl['median_ms']:.2f}x its speed)")
+        if gl['recall'] is not None:
+            close = [m for m in peers if rows[m]['recall'] is not None
+                     and rows[m]['recall'] >= gl['recall'] - 0.05]
+            if close:
+                best = min(close, key=lambda m: rows[m]['median_ms'])
+                text += (f"; fastest peer within 0.05 of GL's recall: "
+                         f"{METHOD_LABELS.get(best, best)} {_number(rows[best]['median_ms'])} ms")
+            else:
+                top = max(peers, key=lambda m: rows[m]['recall'])
+                text += (f"; no peer within 0.05 of GL's recall {gl['recall']:.3f} (best peer "
+                         f"{METHOD_LABELS.get(top, top)} {rows[top]['recall']:.3f})")
+        lines.append(text)
     sweeps = detector.get('sweeps')
     if sweeps:
         lines.append(f"Sweeps at {sweeps['size']} ({sweeps['frames']} frames), median ms "
@@ -109,15 +122,17 @@ def _detector_lines(detector: Mapping[str, Any]) -> list[str]:
 
 
 def _classifier_lines(classifier: Mapping[str, Any]) -> list[str]:
-    lines = [f"Classifier: GTSRB-dev, {classifier['crops']} crops (every "
-             f"{classifier['crop_every']}th of labels.csv), same rendered templates",
+    every = classifier['crop_every']
+    lines = [(f"Classifier: GTSRB-dev, {classifier['crops']} crops ("
+              + ('all' if every == 1 else f'every {every}th') + ' of labels.csv), same '
+              'rendered templates'),
              f"{'method':<40}{'accuracy':>9}{'ms/crop':>9}",
-             f"{'ours: MACE + kth-law + PSR':<40}"
-             f"{_number(classifier['classifier_accuracy'], 3):>9}"
-             f"{_number(classifier['classifier_ms_per_crop'], 2):>9}",
-             f"{'plain NCC (cv2.matchTemplate, 5 scales)':<40}"
-             f"{_number(classifier['ncc_baseline_accuracy'], 3):>9}"
-             f"{_number(classifier['ncc_baseline_ms_per_crop'], 2):>9}"]
+             (f"{'ours: MACE + kth-law + PSR':<40}"
+              f"{_number(classifier['classifier_accuracy'], 3):>9}"
+              f"{_number(classifier['classifier_ms_per_crop'], 2):>9}"),
+             (f"{'plain NCC (cv2.matchTemplate, 5 scales)':<40}"
+              f"{_number(classifier['ncc_baseline_accuracy'], 3):>9}"
+              f"{_number(classifier['ncc_baseline_ms_per_crop'], 2):>9}")]
     if classifier.get('count_by_size_px'):
         lines.append('  by sign width px (n): ' + '; '.join(
             f"{name} ({count}): {classifier['classifier_by_size_px'][name]:.2f} vs "
@@ -134,10 +149,12 @@ def _classifier_lines(classifier: Mapping[str, Any]) -> list[str]:
 def format_table(results: Mapping[str, Any]) -> str:
     """The human-readable summary of a run (what run_all prints)."""
     machine = results['machine']
-    lines = [f"Benchmark {results['date_utc']}: {machine['cpus']} CPUs, {machine['platform']}"
-             + (' -- QUICK RUN: smoke-test subsets, do not quote' if results['quick'] else ''),
-             f"load average at start: {machine['load_average_at_start']}; "
-             f"elapsed {results.get('elapsed_s', 0):.0f} s", '']
+    load = ', '.join(f'{value:.2f}' for value in machine['load_average_at_start'] or [])
+    lines = [(f"Benchmark {results['date_utc']}: {machine['cpus']} CPUs, {machine['platform']}"
+              + (' -- QUICK RUN: smoke-test subsets, do not quote' if results['quick']
+                 else '')),
+             (f"load average (1, 5, 15 min) at start: {load}; "
+              f"elapsed {results.get('elapsed_s', 0):.0f} s"), '']
     detector = results.get('detector')
     problem = _failed(detector)
     lines += [f'Detector stage {problem}'] if problem else _detector_lines(detector)

@@ -32,7 +32,7 @@ classifier (GTSRB crops, ``../shared/data/gtsrb-dev``)
 end to end
     ``Pipeline`` (the node's parameter file, classifier banks cached) on 640x480 frames of
     a synthetic drive: frames per second and per-frame latency; and the node through DDS
-    (``bench_node.main``: the installed executable, frames published at 30 Hz).
+    (``bench_node.main``: the installed executable, frames published at 10 Hz, then 30 Hz).
 
 The papers' headline figures are printed beside them, labelled as quoted.
 
@@ -40,7 +40,7 @@ Output under ``--out DIR``: ``results.json``, ``table.txt`` (the table printed) 
 plots (see ``report.py``). ``--quick`` uses a handful of frames/crops (smoke test, not
 figures to quote). Usage::
 
-    python bench/run_all.py --out out/bench [--quick] [--skip-node]
+    python bench/run_all.py --out out/bench [--quick] [--skip-node] [--params FILE|defaults]
 """
 from __future__ import annotations
 
@@ -57,7 +57,7 @@ import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 import cv2
@@ -67,20 +67,29 @@ BENCH_DIR = Path(__file__).resolve().parent
 if str(BENCH_DIR) not in sys.path:  # the sibling bench scripts are plain modules
     sys.path.insert(0, str(BENCH_DIR))
 
-import bench_classifier  # noqa: E402
-import bench_detector  # noqa: E402
-import bench_node  # noqa: E402
-import report  # noqa: E402
+import bench_classifier
+import bench_detector
+import bench_node
+import report
 
-from speed_sign_detector.config import (ClassifierConfig, DetectorConfig,  # noqa: E402
-                                        PipelineConfig, load_yaml, to_parameters)
-from speed_sign_detector.detection.detector import Detector  # noqa: E402
-from speed_sign_detector.detection.voting_numpy import compute_edges  # noqa: E402
-from speed_sign_detector.errors import SpeedSignError  # noqa: E402
-from speed_sign_detector.pipeline import Pipeline  # noqa: E402
-from speed_sign_detector.recognition.classifier import Classifier  # noqa: E402
-from speed_sign_detector.tools.eval_scenes import (SIZE_BINS_PX, SceneSign,  # noqa: E402
-                                                   read_gtsdb_truth)
+from speed_sign_detector.config import (
+    ClassifierConfig,
+    DetectorConfig,
+    PipelineConfig,
+    load_yaml,
+    to_parameters,
+)
+from speed_sign_detector.detection.detector import Detector
+from speed_sign_detector.detection.voting_numpy import compute_edges
+from speed_sign_detector.errors import SpeedSignError
+from speed_sign_detector.pipeline import Pipeline
+from speed_sign_detector.recognition.classifier import Classifier
+from speed_sign_detector.ros.node import NODE_NAME
+from speed_sign_detector.tools.eval_scenes import (
+    SIZE_BINS_PX,
+    SceneSign,
+    read_gtsdb_truth,
+)
 
 PROJECT_ROOT = BENCH_DIR.parent
 DATA_DIR = PROJECT_ROOT.parent / 'shared' / 'data'
@@ -137,8 +146,9 @@ class BenchSettings:
         crop_every: GTSRB crops used: every Nth of labels.csv (1 = all 4,400).
         speed_frames: synthetic 640x480 frames of 7 candidates timed for the classifier.
         pipeline_frames: synthetic drive frames run through the Pipeline at 640x480.
-        node_seconds: seconds the node is fed at ``node_rate_hz`` (0 = node not run).
-        node_rate_hz: publishing rate of the node stage.
+        node_seconds: seconds the node is fed at each rate (0 = node not run).
+        node_rates_hz: publishing rates of the node stage, run in order (one it can keep
+            up with: latency without queueing; 30 Hz: throughput).
         pipeline_params: ROS parameter file the pipeline and classifier stages load
             (the node's); None = PipelineConfig() defaults.
         classifier_config: overrides the parameter file's classifier config (tests).
@@ -149,17 +159,17 @@ class BenchSettings:
     out_dir: Path
     gtsdb_dir: Path = DATA_DIR / 'gtsdb-dev'
     gtsrb_dir: Path = DATA_DIR / 'gtsrb-dev'
-    detector_frames: int = 30
+    detector_frames: int = 60
     detector_sizes: tuple[str, ...] = tuple(size[0] for size in DETECTOR_SIZES)
     large_frames: int = 2
-    sweep_frames: int = 3
+    sweep_frames: int = 6
     max_radii_px: tuple[float, ...] = (20.0, 40.0, 60.0, 80.0)
     gradient_thresholds: tuple[float, ...] = (20.0, 40.0, 80.0, 160.0)
-    crop_every: int = 2
+    crop_every: int = 1
     speed_frames: int = 10
     pipeline_frames: int = 90
     node_seconds: float = 8.0
-    node_rate_hz: float = 30.0
+    node_rates_hz: tuple[float, ...] = (10.0, 30.0)
     pipeline_params: Path | None = bench_node.PARAMS_FILE
     classifier_config: ClassifierConfig | None = None
     bank_cache: Path = BANK_CACHE
@@ -167,9 +177,11 @@ class BenchSettings:
     command: tuple[str, ...] = field(default_factory=tuple)
 
 
-QUICK = dict(detector_frames=3, large_frames=1, sweep_frames=1, max_radii_px=(20.0, 40.0),
-             gradient_thresholds=(40.0, 100.0), crop_every=1500, speed_frames=2,
-             pipeline_frames=6, node_seconds=2.0)
+#: ``--quick``: a few frames and crops, to check the machinery (figures not to quote).
+QUICK: dict[str, object] = {
+    'detector_frames': 3, 'large_frames': 1, 'sweep_frames': 1, 'max_radii_px': (20.0, 40.0),
+    'gradient_thresholds': (40.0, 100.0), 'crop_every': 1500, 'speed_frames': 2,
+    'pipeline_frames': 6, 'node_seconds': 2.0}
 
 
 def _log(message: str) -> None:
@@ -215,6 +227,12 @@ def _size_bin(radius_px: float) -> str:
         if low <= radius_px < high:
             return f'{low:g}-{high:g}' if high < 1000 else f'{low:g}+'
     return 'other'
+
+
+def _in_bin_order(counts: dict[str, int]) -> dict[str, int]:
+    """``counts`` keyed by size-bin name, in the order of SIZE_BINS_PX."""
+    order = [_size_bin(low) for low, _ in SIZE_BINS_PX]
+    return {name: counts[name] for name in sorted(counts, key=order.index)}
 
 
 def detector_methods(config: DetectorConfig) -> tuple[dict[str, bench_detector.Method],
@@ -289,12 +307,12 @@ def detector_stage(settings: BenchSettings) -> dict[str, object]:
                     'recall': (found[method_name] / signs_total
                                if with_recall and signs_total else None),
                     'recall_by_radius_px': ({b: found_by_bin[method_name].get(b, 0) / n
-                                             for b, n in sorted(signs_by_bin.items())}
+                                             for b, n in _in_bin_order(signs_by_bin).items()}
                                             if with_recall else None)}
             result['sizes'][size_name] = {
                 'width': width, 'height': height, 'how': how, 'frames': len(size_files),
                 'signs': signs_total if with_recall else None,
-                'signs_by_radius_px': dict(sorted(signs_by_bin.items())) if with_recall
+                'signs_by_radius_px': _in_bin_order(signs_by_bin) if with_recall
                 else None, 'methods': rows}
             fastest = min(PEER_METHODS, key=lambda m: rows[m]['median_ms'])
             result['sizes'][size_name]['fastest_peer'] = fastest
@@ -409,10 +427,22 @@ def pipeline_stage(settings: BenchSettings) -> dict[str, object]:
 
 
 def node_stage(settings: BenchSettings) -> dict[str, object]:
-    """The node through DDS (``bench_node.main``), one publishing rate."""
-    argv = ['--rates', f'{settings.node_rate_hz:g}', '--seconds', f'{settings.node_seconds:g}',
+    """The node through DDS (``bench_node.main``) at each of ``node_rates_hz``.
+
+    The node gets, after its own parameter file, ``node_params.yaml`` (in ``out_dir``)
+    holding the pipeline stage's config, so node and pipeline run the same settings.
+    """
+    import yaml
+
+    params_file = settings.out_dir / 'node_params.yaml'
+    params_file.write_text(yaml.safe_dump(
+        {NODE_NAME: {
+            'ros__parameters': to_parameters(pipeline_config(settings))}}))
+    argv = ['--rates', *(f'{rate:g}' for rate in settings.node_rates_hz),
+            '--seconds', f'{settings.node_seconds:g}',
             '--frames', '60', '--domain-id', str(NODE_DOMAIN_ID),
-            '--bank-cache', str(settings.bank_cache), '--json']
+            '--bank-cache', str(settings.bank_cache),
+            '--node-arg=--params-file', f'--node-arg={params_file}', '--json']
     captured = io.StringIO()
     with contextlib.redirect_stdout(captured):
         code = bench_node.main(argv)
@@ -445,7 +475,7 @@ def run_benchmark(settings: BenchSettings) -> dict[str, object]:
     settings.out_dir.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
     results: dict[str, object] = {
-        'date_utc': datetime.now(timezone.utc).isoformat(timespec='seconds'),
+        'date_utc': datetime.now(UTC).isoformat(timespec='seconds'),
         'command': list(settings.command), 'quick': settings.quick,
         'machine': _machine(),
         'gpu': 'none measured: figures are from the GL backend on whatever renderer '

@@ -117,12 +117,13 @@ class DetectorConfig:
                                             'fragments; centres are refined to sub-pixel. '
                                             '0 = vote at the edge level.',
                                             low=0.0, high=100.0)
-    voting_edge_radius_ratio: float = setting(0.66, 'Radius of the edge that votes (with '
-                                              'bright_inside: the inner edge of the red '
-                                              'ring) over the sign\'s outer radius (StVO: '
-                                              '0.66); candidates report the voting radius '
-                                              '/ this, i.e. the outer radius.', low=0.1,
-                                              high=1.0)
+    voting_edge_radius_ratio: float = setting(1.0, 'Candidates report the voting radius '
+                                              '(harmonic mean voting distance) divided by '
+                                              'this. 1 = the radius of the edge that voted '
+                                              '(with bright_inside mostly the inner edge of '
+                                              'the red ring, about 0.7 of the outer radius on '
+                                              'GTSDB); 0.66 (StVO ring proportion) = the '
+                                              'outer radius.', low=0.1, high=1.0)
     suppression_factor: float = setting(1.0, 'Non-maximum suppression: a candidate closer '
                                         'than this many voting radii (the larger of the '
                                         'two) to a better one is the same sign and dropped.',

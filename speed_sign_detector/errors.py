@@ -17,8 +17,16 @@ class DetectorError(SpeedSignError):
     """The detection stage could not run (for example, no OpenGL context)."""
 
 
+class InvalidFrameError(DetectorError, ValueError):
+    """A frame given to the detector is not a usable grayscale image."""
+
+
 class ClassifierError(SpeedSignError):
     """The recognition stage could not run (for example, filter banks not buildable)."""
+
+
+class ClassifierInputError(ClassifierError, ValueError):
+    """An image given to the classifier is not a non-empty 2-D uint8 array."""
 
 
 class ImageConversionError(SpeedSignError, ValueError):

@@ -51,8 +51,9 @@ def test_synthetic_scenes(tmp_path: Path, capsys: pytest.CaptureFixture[str]) ->
     assert result['frames'] == 2 and result['signs'] == 2
     assert result['candidate_recall'] == 1.0 and result['backend'] == 'gl'
     assert result['ms_per_frame'] >= result['detector_ms_per_frame'] > 0.0
-    # the white disc (0.8 r) votes; candidates report it as the outer radius (/ 0.66)
-    assert result['radius_ratio_median'] == pytest.approx(0.8 / 0.66, rel=0.15)
+    # the white disc (0.8 r) votes; candidates report it / voting_edge_radius_ratio
+    ratio = DetectorConfig().voting_edge_radius_ratio
+    assert result['radius_ratio_median'] == pytest.approx(0.8 / ratio, rel=0.15)
     assert eval_tool.main(['scenes', str(tmp_path), '--backend', 'numpy']) == 0
     table = capsys.readouterr().out
     assert 'candidate recall' in table and 'numpy' in table

@@ -13,7 +13,7 @@ import pytest
 from speed_sign_detector.config import DetectorConfig
 from speed_sign_detector.detection.candidates import Candidate
 from speed_sign_detector.detection.detector import Detector
-from speed_sign_detector.detection.gradients import InvalidFrameError
+from speed_sign_detector.errors import InvalidFrameError
 from speed_sign_detector.errors import ConfigError, DetectorError
 
 SUPERSAMPLE = 8
@@ -71,7 +71,7 @@ def assert_found(candidate: Candidate, centre: tuple[float, float], voting_radiu
     error = math.hypot(candidate.x_px - centre[0], candidate.y_px - centre[1])
     assert error <= 1.0, f'centre off by {error:.2f} px: {candidate} vs {centre}'
     assert abs(candidate.band - band_of(detector, voting_radius)) <= 1, candidate
-    reported = voting_radius / detector.config.voting_edge_radius_ratio  # outer radius
+    reported = voting_radius / detector.config.voting_edge_radius_ratio
     assert 0.7 * reported <= candidate.radius_px <= 1.3 * reported, candidate
 
 
@@ -231,6 +231,14 @@ def test_polarity_options() -> None:
     # 'both' scores are halved (two vote directions), and only the inner edge votes here
     assert scores['both'] > 0.35
     assert scores['bright_inside'] < 0.5 * min(scores['dark_inside'], scores['both'])
+
+
+def test_radius_reported_as_outer_radius() -> None:
+    frame = ring_frame(200, 160, (100.0, 80.0), 15.0)
+    with Detector(DetectorConfig(), backend='gl') as voting, \
+            Detector(DetectorConfig(voting_edge_radius_ratio=0.8), backend='gl') as outer:
+        assert voting.detect(frame)[0].radius_px == pytest.approx(0.8 * 15.0, rel=0.1)
+        assert outer.detect(frame)[0].radius_px == pytest.approx(15.0, rel=0.1)
 
 
 def test_auto_falls_back_to_numpy_when_gl_is_unavailable(

@@ -30,7 +30,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profi
 from sensor_msgs.msg import CompressedImage, Image, PointCloud2
 from std_msgs.msg import Header, UInt16
 
-from speed_sign_detector.config import node_option_specs, parameter_specs
+from speed_sign_detector.config import DetectorConfig, node_option_specs, parameter_specs
 from speed_sign_detector.recognition.templates import render_sign
 from speed_sign_detector.ros.messages import image_message, pointcloud_to_array
 from speed_sign_detector.ros.node import (
@@ -387,7 +387,7 @@ def test_parameter_changes_apply_or_are_rejected_with_a_reason(ros: tuple) -> No
     assert 'max_radius_px' in cross.reason
     [choice] = call_set_parameters(probe, parameter('detector.polarity', 'sideways'))
     assert 'sideways' in choice.reason
-    assert node.get_parameter('detector.min_radius_px').value == 5.0
+    assert node.get_parameter('detector.min_radius_px').value == DetectorConfig().min_radius_px
     assert node.get_parameter('detector.max_candidates').value == 2
     [restored] = call_set_parameters(probe, parameter('detector.max_candidates', 7))
     assert restored.successful

@@ -21,7 +21,11 @@ class Candidate:
         x_px: centre column in pixels (0 = left edge of the frame, pixel centres at +0.5
             are *not* used: pixel (i, j) has centre (j, i)).
         y_px: centre row in pixels.
-        radius_px: estimated radius of the sign's outer ring, in pixels.
+        radius_px: estimated radius of the sign, in pixels: the radius of the edge that
+            voted (harmonic mean voting distance) divided by
+            ``DetectorConfig.voting_edge_radius_ratio``. With the defaults (ratio 1,
+            bright_inside) that is mostly the inner edge of the red ring, about 0.7 of
+            the outer radius (median on GTSDB); ratio 0.66 reports the outer radius.
         score: detector score (normalised vote; larger is more sign-like). Comparable
             between candidates of one frame, not an absolute probability.
         band: index of the radius band that won (0 = smallest radii).

@@ -97,8 +97,8 @@ class Detector:
     def detect(self, gray: np.ndarray) -> tuple[Candidate, ...]:
         """Candidates of one (H, W) uint8 frame, best first (at most max_candidates).
 
-        ``radius_px`` is the sign's outer radius: the voting radius (harmonic mean voting
-        distance) divided by ``config.voting_edge_radius_ratio``.
+        ``radius_px`` is the voting radius (harmonic mean voting distance) divided by
+        ``config.voting_edge_radius_ratio`` (see :class:`Candidate`).
 
         Raises:
             InvalidFrameError (a ValueError): unusable frame.

@@ -22,11 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from speed_sign_detector.errors import DetectorError
-
-
-class InvalidFrameError(DetectorError, ValueError):
-    """A frame given to the detector is not a usable grayscale image."""
+from speed_sign_detector.errors import InvalidFrameError
 
 
 @dataclass(frozen=True)

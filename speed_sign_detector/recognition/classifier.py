@@ -40,7 +40,7 @@ import numpy as np
 
 from speed_sign_detector.config import ClassifierConfig
 from speed_sign_detector.detection.candidates import Candidate
-from speed_sign_detector.errors import ClassifierError
+from speed_sign_detector.errors import ClassifierError, ClassifierInputError
 from speed_sign_detector.recognition.correlation import (
     correlate,
     disc_window,
@@ -61,10 +61,6 @@ SPEED_LIMITS_KMH: tuple[int, ...] = (5, 10, 20, 30, 40, 50, 60, 70, 80, 90, 100,
 LABEL_END_OF_LIMIT = 'end_of_limit'
 LABEL_OTHER_SIGN = 'other_sign'
 LABEL_NO_SIGN = 'no_sign'
-
-
-class ClassifierInputError(ClassifierError, ValueError):
-    """An image given to the classifier is not a non-empty 2-D uint8 array."""
 
 
 @dataclass(frozen=True)

@@ -483,7 +483,7 @@ def format_report(summary: dict[str, Any]) -> str:
         recall = summary['recall']
         lines.append(f'signs {summary["signs"]}, recognized {summary["recognized"]}, recall '
                      f'{recall:.3f}' if recall is not None else
-                     f'signs 0 (no speed-limit sign in the truth)')
+                     'signs 0 (no speed-limit sign in the truth)')
         lines.append(f'wrong limits {summary["wrong_limits"]} (look-alike '
                      f'{summary["lookalike_limits"]}, misread {summary["misread_limits"]}, '
                      f'phantom {summary["phantom_limits"]}), '
