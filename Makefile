@@ -19,7 +19,7 @@ $(INSTALLED): setup.py package.xml pyproject.toml
 demo: $(INSTALLED)
 	rm -rf $(OUT)/demo && mkdir -p $(OUT)/demo
 	$(BIN)/speed_sign_synth $(OUT)/demo/drive --truth $(OUT)/demo/truth.csv --seed 7 \
-		--duration 24 --lighting mixed
+		--duration 24 --lighting mixed --compressed
 	$(BIN)/speed_sign_eval bag $(OUT)/demo/drive --truth $(OUT)/demo/truth.csv \
 		--out $(OUT)/demo/results --contact-sheet $(OUT)/demo/contact_sheet.png
 	@echo "results bag: $(OUT)/demo/results   picture: $(OUT)/demo/contact_sheet.png"
