@@ -42,7 +42,6 @@ setup(
     maintainer_email='maintainers@speed-sign-detector.invalid',
     description='Real-time EU speed-limit sign detection and recognition (GPU RSD + FFT MACE).',
     license='Apache-2.0',
-    tests_require=['pytest'],
     entry_points={
         'console_scripts': [
             'speed_sign_detector = speed_sign_detector.ros.node:main',

@@ -70,7 +70,9 @@ def _detector_lines(detector: Mapping[str, Any]) -> list[str]:
     lines = [(f"Detector stage: GTSDB-dev scenes holding a speed-limit sign "
               f"({detector['frames_available']} available), top-{detector['top_n']} "
               f"candidates; recall = a candidate centre within max(3, 0.35 r) px of the sign"),
-             f"GL renderer: {detector['renderer']}"]
+             f"GL renderer: {detector['renderer']}"
+             + (' (software rasterizer on the CPU: no GPU figure)'
+                if detector.get('software_renderer') else ' (hardware)')]
     header = f"{'method':<24}"
     for name, size in sizes.items():
         header += f"{name + ' ms':>13}" + (f"{'recall':>8}" if size['signs'] is not None else '')
@@ -108,6 +110,14 @@ def _detector_lines(detector: Mapping[str, Any]) -> list[str]:
                 text += (f"; no peer within 0.05 of GL's recall {gl['recall']:.3f} (best peer "
                          f"{METHOD_LABELS.get(top, top)} {rows[top]['recall']:.3f})")
         lines.append(text)
+    native = next((name for name, size in sizes.items() if size['how'] == 'native'), None)
+    if native and sizes[native]['signs_by_radius_px']:
+        counts = sizes[native]['signs_by_radius_px']
+        lines.append(f"Recall by sign radius at {native}, px (signs): " + ', '.join(
+            f'{name} ({count})' for name, count in counts.items()))
+        for method, item in sizes[native]['methods'].items():
+            lines.append(f"  {METHOD_LABELS.get(method, method):<24}" + ''.join(
+                f"{item['recall_by_radius_px'][name]:>8.2f}" for name in counts))
     sweeps = detector.get('sweeps')
     if sweeps:
         lines.append(f"Sweeps at {sweeps['size']} ({sweeps['frames']} frames), median ms "
@@ -237,7 +247,7 @@ def _plot_recall(detector: Mapping[str, Any], path: Path) -> None:
     axes.set_ylim(0, 1)
     axes.set_title('Detector recall on GTSDB-dev speed-limit signs', fontsize=9)
     axes.grid(True, axis='y', alpha=0.3)
-    axes.legend(fontsize=8)
+    axes.legend(fontsize=8, loc='upper center', bbox_to_anchor=(0.5, -0.22), ncol=3)
     figure.tight_layout()
     figure.savefig(path, dpi=110)
     plt.close(figure)

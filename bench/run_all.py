@@ -107,6 +107,8 @@ DETECTOR_SIZES: tuple[tuple[str, int, int, str, bool], ...] = (
     ('1920x1080', 1920, 1080, 'resize', False),
 )
 OUR_METHODS = ('gl', 'numpy')
+#: GL_RENDERER substrings of Mesa's CPU rasterizers: GL figures from them are CPU figures.
+SOFTWARE_RENDERERS = ('llvmpipe', 'softpipe', 'swrast', 'software')
 PEER_METHODS = ('hough_gradient', 'hough_gradient_alt', 'radsym_rsd', 'radsym_frst')
 
 #: The papers' headline figures: quoted from /work/shared/papers, NOT measured here.
@@ -154,6 +156,7 @@ class BenchSettings:
         classifier_config: overrides the parameter file's classifier config (tests).
         bank_cache: filter-bank cache folder shared by the classifier, pipeline and node.
         quick: recorded in the JSON: figures from a smoke run, not to be quoted.
+        command: the command line, recorded in the JSON.
     """
 
     out_dir: Path
@@ -263,8 +266,10 @@ def detector_stage(settings: BenchSettings) -> dict[str, object]:
         scenes[name] = gray
     config = DetectorConfig()
     methods, detectors = detector_methods(config)
+    renderer = detectors[0].renderer
     result: dict[str, object] = {
-        'renderer': detectors[0].renderer, 'backend_gl': detectors[0].backend_name,
+        'renderer': renderer, 'backend_gl': detectors[0].backend_name,
+        'software_renderer': any(name in renderer.lower() for name in SOFTWARE_RENDERERS),
         'config': dataclasses.asdict(config), 'frames_available': len(limit_files),
         'top_n': bench_detector.TOP_N, 'peer_radius_px': [bench_detector.MIN_RADIUS_PX,
                                                           bench_detector.MAX_RADIUS_PX],
@@ -478,8 +483,6 @@ def run_benchmark(settings: BenchSettings) -> dict[str, object]:
         'date_utc': datetime.now(UTC).isoformat(timespec='seconds'),
         'command': list(settings.command), 'quick': settings.quick,
         'machine': _machine(),
-        'gpu': 'none measured: figures are from the GL backend on whatever renderer '
-               'detector.renderer names (llvmpipe = CPU)',
         'settings': {k: (str(v) if isinstance(v, Path) else v)
                      for k, v in dataclasses.asdict(settings).items()},
         'paper_figures_quoted_not_measured': PAPER_FIGURES,

@@ -217,24 +217,29 @@ class ClassifierConfig:
 class TrackerConfig:
     """Temporal integration (IVS 2011 III-C, DAGM 2010 section 4)."""
 
-    window_frames: int = setting(10, 'Frames a track is remembered without a new '
-                                 'observation.', low=1, high=100)
-    window_s: float = setting(1.0, 'Seconds (message time) a track is remembered without '
-                              'a new observation; the shorter of the two limits applies.',
+    window_frames: int = setting(10, 'Frames of the running window: votes older than '
+                                 'this are forgotten, and a track unobserved this long '
+                                 'expires.', low=1, high=100)
+    window_s: float = setting(1.0, 'Seconds (message time) of the running window; the '
+                              'shorter of window_frames and window_s applies.',
                               low=0.01, high=60.0)
     association_radius_factor: float = setting(1.0, 'A candidate joins a track when its '
                                                'centre lies within this many track radii.',
                                                low=0.1, high=10.0)
     growth_boost: float = setting(1.5, 'Factor on the vote of an observation that is larger '
-                                  'than the last one (approaching sign).', low=1.0, high=10.0)
+                                  'than the oldest one in the window (approaching sign).',
+                                  low=1.0, high=10.0)
     shrink_penalty: float = setting(0.5, 'Factor on the vote of an observation that is '
-                                    'smaller than the last one.', low=0.0, high=1.0)
+                                    'smaller than the oldest one in the window.',
+                                    low=0.0, high=1.0)
     rotation_jump_deg: float = setting(8.0, 'In-plane rotation change counted as a jump.',
                                        low=0.0, high=90.0)
     rotation_penalty: float = setting(0.5, 'Factor on the vote when the rotation jumps.',
                                       low=0.0, high=1.0)
-    recognition_threshold: float = setting(25.0, 'Accumulated evidence (sum of weighted '
-                                           'PSRs) at which a limit is recognized.',
+    recognition_threshold: float = setting(100.0, 'Evidence (sum of the weighted PSRs '
+                                           'inside the window) at which a limit is '
+                                           'recognized. A static artifact of PSR 9 reaches '
+                                           'at most 10 x 9 = 90 in a 10-frame window.',
                                            low=0.0, high=1e6)
 
     def __post_init__(self) -> None:

@@ -2,20 +2,26 @@
 
 Follows IVS 2011 section III-C and DAGM 2010 section 4: a running table of sign
 candidates over the last ~10 frames. A candidate joins the track whose predicted centre
-is nearest (within ``association_radius_factor`` radii); each observation adds its PSR
-as a vote for its label, multiplied by ``growth_boost`` when the sign appears larger than
-last time (an approaching sign), by ``shrink_penalty`` when it appears smaller, and by
-``rotation_penalty`` when its in-plane rotation jumps. A track's label is decided by a
-weighted majority vote: a limit is recognized once its evidence reaches
-``recognition_threshold`` and holds the majority of the track's evidence. The active
-limit is held until another limit or an end-of-limit sign is recognized.
+is nearest (within ``association_radius_factor`` radii). Each observation votes for its
+label with its PSR, multiplied by ``growth_boost`` when the sign is larger than at the
+oldest observation still in the window (an approaching sign; at 30 fps a sign grows a
+few per cent per frame, within the noise of one frame to the next, so growth is judged
+over the window), by ``shrink_penalty`` when it is smaller, and by ``rotation_penalty``
+when its in-plane rotation jumps from the previous observation. A track's evidence for
+a label is the sum of its votes inside the window (``window_frames`` frames and
+``window_s`` seconds of message time, whichever is shorter): an artifact that stays the
+same size for ever never gathers more than a window of unboosted votes. A limit is
+recognized once its evidence reaches ``recognition_threshold`` and holds the majority
+of the track's evidence; each track decides once. The active limit is held until
+another limit or an end-of-limit sign is recognized.
 
-Tracks expire by message time (``window_s``) and by frame count (``window_frames``),
-whichever comes first, so dropped frames do not stretch a track's memory.
+Tracks expire when unobserved for the same window, so dropped frames do not stretch
+their memory.
 """
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -88,22 +94,35 @@ class _Track:
     last_stamp_s: float
     last_frame_index: int
     velocity_px_per_s: tuple[float, float] = (0.0, 0.0)
-    evidence: dict[str, float] = field(default_factory=dict)
+    #: votes inside the window: (frame index, stamp s, label, weighted vote, radius px)
+    votes: deque[tuple[int, float, str, float, float]] = field(default_factory=deque)
     observations: int = 0
     recognized: bool = False
+
+    @property
+    def evidence(self) -> dict[str, float]:
+        """Sum of the votes inside the window, by label."""
+        totals: dict[str, float] = {}
+        for _, _, label, vote, _ in self.votes:
+            totals[label] = totals.get(label, 0.0) + vote
+        return totals
+
+    def forget_votes_before(self, frame_index: int, stamp_s: float) -> None:
+        """Drop votes older than the window (``frame_index``/``stamp_s`` are its start)."""
+        while self.votes and (self.votes[0][0] < frame_index or self.votes[0][1] < stamp_s):
+            self.votes.popleft()
 
     def predicted_centre(self, stamp_s: float) -> tuple[float, float]:
         elapsed_s = max(0.0, stamp_s - self.last_stamp_s)
         return (self.x_px + self.velocity_px_per_s[0] * elapsed_s,
                 self.y_px + self.velocity_px_per_s[1] * elapsed_s)
 
-    def leading_label(self) -> tuple[str, float]:
-        return max(self.evidence.items(), key=lambda item: item[1])
-
     def snapshot(self) -> TrackState:
-        label, evidence = self.leading_label() if self.evidence else (LABEL_NO_SIGN, 0.0)
+        evidence = self.evidence
+        label, leading = (max(evidence.items(), key=lambda item: item[1]) if evidence
+                          else (LABEL_NO_SIGN, 0.0))
         return TrackState(self.track_id, self.x_px, self.y_px, self.radius_px, label,
-                          evidence, sum(self.evidence.values()), self.observations,
+                          leading, sum(evidence.values()), self.observations,
                           self.first_stamp_s, self.last_stamp_s, self.recognized)
 
 
@@ -208,21 +227,25 @@ class Tracker:
     def _observe(self, track: _Track, candidate: Candidate, classification: Classification,
                  stamp_s: float) -> None:
         config = self.config
+        track.forget_votes_before(self._frame_index - config.window_frames + 1,
+                                  stamp_s - config.window_s)
         weight = 1.0
-        if track.observations > 0:
-            growth = classification.radius_px / max(track.radius_px, 1e-6) - 1.0
+        if track.votes:
+            reference_radius_px = track.votes[0][4]
+            growth = classification.radius_px / max(reference_radius_px, 1e-6) - 1.0
             if growth > SIZE_CHANGE_TOLERANCE:
                 weight *= config.growth_boost
             elif growth < -SIZE_CHANGE_TOLERANCE:
                 weight *= config.shrink_penalty
+        if track.observations > 0:
             if abs(classification.rotation_deg - track.rotation_deg) > config.rotation_jump_deg:
                 weight *= config.rotation_penalty
             elapsed_s = stamp_s - track.last_stamp_s
             if elapsed_s > 0:
                 track.velocity_px_per_s = ((classification.x_px - track.x_px) / elapsed_s,
                                            (classification.y_px - track.y_px) / elapsed_s)
-        track.evidence[classification.label] = (track.evidence.get(classification.label, 0.0)
-                                                + weight * max(classification.psr, 0.0))
+        track.votes.append((self._frame_index, stamp_s, classification.label,
+                            weight * max(classification.psr, 0.0), classification.radius_px))
         track.x_px, track.y_px = classification.x_px, classification.y_px
         track.radius_px = classification.radius_px
         track.rotation_deg = classification.rotation_deg
@@ -234,10 +257,11 @@ class Tracker:
         """The label this track newly recognizes, if any (each track decides once)."""
         if track.recognized:
             return None
-        label, evidence = track.leading_label()
-        if evidence < self.config.recognition_threshold:
+        evidence = track.evidence
+        label, leading = max(evidence.items(), key=lambda item: item[1])
+        if leading < self.config.recognition_threshold:
             return None
-        if evidence <= 0.5 * sum(track.evidence.values()):
+        if leading <= 0.5 * sum(evidence.values()):
             return None
         if label != LABEL_END_OF_LIMIT and not label.isdigit():
             return None  # another sign (no overtaking, ...): tracked, never reported

@@ -56,6 +56,7 @@ def test_writes_json_table_and_plots(results: dict) -> None:
                 'detector', 'classifier', 'pipeline', 'node', 'elapsed_s', 'plots'):
         assert key in saved, key
     assert 'skipped' in saved['node']
+    assert isinstance(saved['detector']['software_renderer'], bool)
     for stage in ('detector', 'classifier', 'pipeline'):
         assert 'error' not in saved[stage], saved[stage]
     names = {Path(path).name for path in saved['plots']}

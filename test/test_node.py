@@ -26,12 +26,21 @@ from rcl_interfaces.srv import SetParameters
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos import (
+    DurabilityPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+    qos_profile_sensor_data,
+)
+from scene_helpers import approach_frames, textured_background
 from sensor_msgs.msg import CompressedImage, Image, PointCloud2
 from std_msgs.msg import Header, UInt16
 
-from speed_sign_detector.config import DetectorConfig, node_option_specs, parameter_specs
-from speed_sign_detector.recognition.templates import render_sign
+from speed_sign_detector.config import (
+    DetectorConfig,
+    node_option_specs,
+    parameter_specs,
+)
 from speed_sign_detector.ros.messages import image_message, pointcloud_to_array
 from speed_sign_detector.ros.node import (
     NODE_NAME,
@@ -46,36 +55,6 @@ pytestmark = pytest.mark.ros
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
-
-
-def textured_background(seed: int) -> np.ndarray:
-    """Road-scene-like clutter: smoothed noise, BGR (HEIGHT, WIDTH, 3) uint8."""
-    rng = np.random.default_rng(seed)
-    noise = rng.normal(110, 40, (HEIGHT // 8, WIDTH // 8, 3)).astype(np.float32)
-    smooth = cv2.resize(noise, (WIDTH, HEIGHT), interpolation=cv2.INTER_CUBIC)
-    grain = rng.normal(0, 4, (HEIGHT, WIDTH, 3))
-    return np.clip(smooth + grain, 0, 255).astype(np.uint8)
-
-
-def approach_frames(kind: str, count: int, seed: int) -> Iterator[tuple[np.ndarray, float,
-                                                                          float, float]]:
-    """A sign approaching the camera: it grows and drifts outward frame by frame.
-
-    Yields:
-        (bgr frame, centre x px, centre y px, radius px).
-    """
-    background = textured_background(seed)
-    for index in range(count):
-        diameter = 26 + 2 * index
-        x, y = 200 + 2 * index, 80 - index
-        bgr, alpha = render_sign(kind, diameter)
-        frame = background.copy()
-        top, left = y - diameter // 2, x - diameter // 2
-        region = frame[top:top + diameter, left:left + diameter].astype(np.float32)
-        blended = region * (1 - alpha[..., None]) + bgr.astype(np.float32) * alpha[..., None]
-        frame[top:top + diameter, left:left + diameter] = blended.astype(np.uint8)
-        frame = cv2.GaussianBlur(frame, (3, 3), 0.6)
-        yield frame, left + diameter / 2, top + diameter / 2, diameter / 2
 
 
 class Probe(Node):

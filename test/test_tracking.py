@@ -132,3 +132,28 @@ def test_time_going_backwards_resets() -> None:
 def test_non_finite_stamp_is_rejected() -> None:
     with pytest.raises(ValueError, match='finite'):
         Tracker().update(float('nan'), [])
+
+
+def test_static_artifact_never_reaches_the_default_threshold() -> None:
+    """A round artifact that never grows (a sticker on the windscreen) scores a PSR of a
+    real sign's detection every frame for a long time: it must never become a limit,
+    while a sign of the same PSR approaching is recognized with the default settings."""
+    tracker = Tracker(TrackerConfig())
+    for index in range(300):
+        update = tracker.update(index * FRAME_PERIOD_S, [observation('110', 578.0, 71.0, 25.0,
+                                                                     psr=9.0)])
+        assert update.recognized_limit_kmh == 0
+    assert update.tracks[0].observations == 300
+    assert update.tracks[0].evidence <= 10 * 9.0
+    approaching = Tracker(TrackerConfig())
+    recognized = approach(approaching, '110', frames=20, growth_px=0.3)
+    assert [value for value in recognized if value] == [110]
+
+
+def test_votes_outside_the_window_are_forgotten() -> None:
+    tracker = Tracker(TrackerConfig(window_frames=5, window_s=10.0, growth_boost=1.0,
+                                    recognition_threshold=1e6))
+    for index in range(12):
+        update = tracker.update(index * FRAME_PERIOD_S, [observation('30', 100.0, 100.0, 20.0)])
+    assert update.tracks[0].observations == 12
+    assert update.tracks[0].evidence == pytest.approx(5 * 10.0)
