@@ -466,6 +466,8 @@ class Classifier:
         raw, scale = self._roi(gray, x_px, y_px, largest, scale)
         enhanced = self._clahe.apply(raw) if self._clahe is not None else raw
         best = self._detect(enhanced, indices, largest, radius_scaled)
+        if best.psr < config.detection_psr_threshold:
+            return self._no_sign(x_px, y_px, radius_px, best.psr)
         det_bank = self.banks[best.bank_index]
         det_offset = (largest - det_bank.fft_size) // 2
         # sign centre in ROI pixel coordinates (continuous)
