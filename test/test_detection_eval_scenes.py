@@ -8,11 +8,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from scene_helpers import paste, textured_background
 from test_detection_synthetic import ring_frame
 
 from speed_sign_detector.config import DetectorConfig
 from speed_sign_detector.detection.candidates import Candidate
 from speed_sign_detector.detection.detector import Detector
+from speed_sign_detector.recognition.templates import render_sign
 from speed_sign_detector.tools import eval as eval_tool
 from speed_sign_detector.tools.eval_scenes import SceneSign, is_found, read_gtsdb_truth
 
@@ -93,3 +95,26 @@ def test_real_scenes_subset(shared_data_dir: Path, tmp_path: Path,
             found += sum(is_found(s, candidates) for s in truth[name] if s.limit_kmh)
     assert result['found'] == found
     assert result['candidate_recall'] == pytest.approx(found / expected_signs)
+
+
+def test_recognition_fields_on_rendered_signs(tmp_path: Path,
+                                              capsys: pytest.CaptureFixture[str]) -> None:
+    """A 50 sign labelled 50 is recognized; the same sign labelled 80 (class 5) is not,
+    and its reading counts as a false limit, as does a 50 on an unlabelled frame."""
+    (tmp_path / 'images').mkdir()
+    bgr, alpha = render_sign('50', 48)
+    for index in range(3):
+        frame = textured_background(index, 400, 300)
+        paste(frame, bgr, alpha, 176, 126)
+        cv2.imwrite(str(tmp_path / 'images' / f'{index:05d}.png'), frame)
+    box = '176;126;224;174'
+    (tmp_path / 'gt.txt').write_text(f'00000.png;{box};2\n00001.png;{box};5\n'
+                                     '00002.png;10;10;30;30;12\n')
+    result = run_json(['scenes', str(tmp_path), '--json', '--backend', 'gl'], capsys)
+    assert result['signs'] == 2 and result['found'] == 2
+    assert result['recognized'] == 1
+    assert result['recognition_recall'] == 0.5
+    assert result['false_limits'] == 2
+    assert result['false_limits_per_frame'] == pytest.approx(2 / 3)
+    detection_only = run_json(['scenes', str(tmp_path), '--json', '--no-classify'], capsys)
+    assert 'recognized' not in detection_only and detection_only['found'] == 2

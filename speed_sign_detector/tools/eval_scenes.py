@@ -1,17 +1,22 @@
-"""``speed_sign_eval scenes DIR``: detection metrics on GTSDB-format scenes.
+"""``speed_sign_eval scenes DIR``: detection and recognition metrics on GTSDB-format scenes.
 
 ``DIR`` holds ``images/`` and a GTSDB ``gt.txt`` (``file;x1;y1;x2;y2;classId`` per sign,
-box corners in pixels). Every image is read as grayscale and run through the detector.
+box corners in pixels). Every image is read as grayscale and run through the detector,
+then (unless ``--no-classify``) the classifier, one frame at a time (no tracking).
 A speed-limit sign (classes 0-5, 7, 8) counts as found when one of the frame's top-N
 candidates has its centre within ``max(3 px, 0.35 r)`` of the box centre, with
-``r = (w + h) / 4``.
+``r = (w + h) / 4``; as recognized when such a candidate is also classified as its
+limit. A false limit is a candidate classified as a limit that lies on no speed-limit
+sign of that value (background, another sign such as end of 80, or a misread value).
 
 Output (``--json``: one JSON object as the last stdout line): ``frames``, ``signs``,
 ``found``, ``candidate_recall``, ``ms_per_frame`` (everything per frame: reading,
 conversion, detection, scoring), ``detector_ms_per_frame`` (``Detector.detect`` alone),
 ``backend``, ``renderer``, ``max_candidates``, ``recall_by_size`` (per sign radius range),
 ``radius_ratio_median`` (candidate radius / box radius over the found signs: the
-detector reports the radius of the edge that voted, mostly the inner edge of the ring).
+detector reports the radius of the edge that voted, mostly the inner edge of the ring);
+with classification: ``recognized``, ``recognition_recall``, ``false_limits``,
+``false_limits_per_frame``, ``classifier_ms_per_frame``.
 """
 from __future__ import annotations
 
@@ -29,10 +34,11 @@ from pathlib import Path
 
 import cv2
 
-from speed_sign_detector.config import DetectorConfig, load_yaml
+from speed_sign_detector.config import PipelineConfig, load_yaml
 from speed_sign_detector.detection.candidates import Candidate
 from speed_sign_detector.detection.detector import Detector
 from speed_sign_detector.errors import TruthFileError
+from speed_sign_detector.recognition.classifier import Classification, Classifier
 
 LOGGER = logging.getLogger(__name__)
 
@@ -114,6 +120,19 @@ def matching_candidate(sign: SceneSign, candidates: Sequence[Candidate]) -> Cand
                 None)
 
 
+def count_false_limits(signs: Sequence[SceneSign], candidates: Sequence[Candidate],
+                       classifications: Sequence[Classification]) -> int:
+    """Candidates read as a limit that lie on no speed-limit sign of that value."""
+    false_limits = 0
+    for candidate, classification in zip(candidates, classifications):
+        if classification.limit_kmh is None:
+            continue
+        on_signs = [sign for sign in signs if matching_candidate(sign, [candidate])]
+        if not any(sign.limit_kmh == classification.limit_kmh for sign in on_signs):
+            false_limits += 1
+    return false_limits
+
+
 def is_found(sign: SceneSign, candidates: Sequence[Candidate]) -> bool:
     """True when a candidate centre lies within ``max(3, 0.35 r)`` px of the sign's centre."""
     return matching_candidate(sign, candidates) is not None
@@ -128,7 +147,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument('--json', action='store_true', help='print one JSON object')
     parser.add_argument('--backend', choices=('auto', 'gl', 'numpy'), default='auto')
     parser.add_argument('--config', type=Path, default=None,
-                        help='ROS 2 parameter YAML file (detector section used)')
+                        help='ROS 2 parameter YAML file of the node')
+    parser.add_argument('--no-classify', action='store_true',
+                        help='detection metrics only (no classifier)')
     parser.add_argument('--max-candidates', type=int, default=None,
                         help='top-N candidates per frame (default: the config, 7)')
     parser.add_argument('--limit', type=int, default=0,
@@ -149,13 +170,16 @@ def run(args: argparse.Namespace) -> int:
         files = files[:args.limit]
     if not files:
         raise TruthFileError(f'no images in {image_dir}')
-    config = load_yaml(args.config).detector if args.config else DetectorConfig()
+    pipeline_config = load_yaml(args.config) if args.config else PipelineConfig()
+    config = pipeline_config.detector
+    classifier = None if args.no_classify else Classifier(pipeline_config.classifier)
     if args.max_candidates is not None:
         config = dataclasses.replace(config, max_candidates=args.max_candidates)
     signs = found = 0
     bins_total = [0] * len(SIZE_BINS_PX)
     bins_found = [0] * len(SIZE_BINS_PX)
-    detector_s = 0.0
+    detector_s = classifier_s = 0.0
+    recognized = false_limits = 0
     radius_ratios: list[float] = []
     start = time.perf_counter()
     with Detector(config, backend=args.backend) as detector:
@@ -166,11 +190,22 @@ def run(args: argparse.Namespace) -> int:
             tick = time.perf_counter()
             candidates = detector.detect(gray)
             detector_s += time.perf_counter() - tick
+            classifications: tuple[Classification, ...] = ()
+            if classifier is not None:
+                tick = time.perf_counter()
+                classifications = classifier.classify(gray, candidates)
+                classifier_s += time.perf_counter() - tick
+                false_limits += count_false_limits(truth.get(name, ()), candidates,
+                                                   classifications)
             for sign in truth.get(name, ()):
                 if not sign.limit_kmh:
                     continue
                 match = matching_candidate(sign, candidates)
                 hit = match is not None
+                recognized += any(
+                    classification.limit_kmh == sign.limit_kmh
+                    and matching_candidate(sign, [candidate]) is not None
+                    for candidate, classification in zip(candidates, classifications))
                 if hit:
                     radius_ratios.append(match.radius_px / sign.radius_px)
                 signs += 1
@@ -199,6 +234,14 @@ def run(args: argparse.Namespace) -> int:
             'signs': total, 'recall': (hits / total if total else None)}
             for (low, high), total, hits in zip(SIZE_BINS_PX, bins_total, bins_found)},
     }
+    if classifier is not None:
+        result.update({
+            'recognized': recognized,
+            'recognition_recall': recognized / signs if signs else 0.0,
+            'false_limits': false_limits,
+            'false_limits_per_frame': false_limits / len(files),
+            'classifier_ms_per_frame': 1e3 * classifier_s / len(files),
+        })
     if args.json:
         print(json.dumps(result), file=sys.stdout)
     else:
@@ -217,6 +260,13 @@ def _print_table(result: dict) -> None:
     print(f"{'detector ms per frame':<28}{result['detector_ms_per_frame']:>12.1f}")
     if result['radius_ratio_median'] is not None:
         print(f"{'radius ratio (median)':<28}{result['radius_ratio_median']:>12.2f}")
+    if 'recognized' in result:
+        print(f"{'recognition recall':<28}{result['recognition_recall']:>12.3f}")
+        print(f"{'recognized / signs':<28}"
+              f"{str(result['recognized']) + '/' + str(result['signs']):>12}")
+        print(f"{'false limits (per frame)':<28}{result['false_limits']:>12}"
+              f"  ({result['false_limits_per_frame']:.4f})")
+        print(f"{'classifier ms per frame':<28}{result['classifier_ms_per_frame']:>12.1f}")
     for name, item in result['recall_by_size'].items():
         recall = '-' if item['recall'] is None else f"{item['recall']:.3f}"
         print(f"{'recall, radius ' + name:<28}{recall:>12}  ({item['signs']} signs)")
