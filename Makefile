@@ -28,7 +28,7 @@ demo: $(INSTALLED)
 live-demo: $(INSTALLED)
 	rm -rf $(OUT)/live-demo && mkdir -p $(OUT)/live-demo
 	$(BIN)/speed_sign_synth $(OUT)/live-demo/drive --seed 3 --duration 15 --compressed
-	@set -e; \
+	@set -e; export FASTRTPS_DEFAULT_PROFILES_FILE=$(CURDIR)/config/fastdds_large_images.xml; \
 	$(BIN)/speed_sign_detector --ros-args -r image/compressed:=/camera/image_raw/compressed & \
 	node=$$!; trap 'kill -INT $$node $$monitor 2>/dev/null; wait $$node' EXIT; \
 	$(BIN)/speed_sign_monitor --timeout 120 & monitor=$$!; \

@@ -16,7 +16,7 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE_NAME}']),
         (f'share/{PACKAGE_NAME}', ['package.xml']),
-        (f'share/{PACKAGE_NAME}/config', glob('config/*.yaml')),
+        (f'share/{PACKAGE_NAME}/config', glob('config/*.yaml') + glob('config/*.xml')),
         (f'share/{PACKAGE_NAME}/launch', glob('launch/*.launch.py')),
     ],
     python_requires='>=3.10',

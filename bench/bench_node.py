@@ -49,6 +49,7 @@ from speed_sign_detector.synthetic import DriveConfig, SyntheticDrive
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
 PARAMS_FILE = PROJECT_ROOT / 'config' / 'speed_sign_detector.yaml'
+DDS_PROFILE = PROJECT_ROOT / 'config' / 'fastdds_large_images.xml'
 TARGET_FPS = 30.0
 TARGET_RSS_MB = 400.0
 
@@ -192,8 +193,14 @@ def main(argv: list[str] | None = None) -> int:
                         help='classifier filter-bank cache folder')
     parser.add_argument('--node-arg', action='append', default=[],
                         help='extra --ros-args argument for the node (e.g. -p backend:=numpy)')
+    parser.add_argument('--dds-profile', default=str(DDS_PROFILE),
+                        help='Fast DDS profile for both processes unless '
+                        'FASTRTPS_DEFAULT_PROFILES_FILE is set ("" = Fast DDS defaults, '
+                        'which lose large best-effort frames)')
     parser.add_argument('--json', action='store_true', help='print one JSON object last')
     args = parser.parse_args(argv)
+    if args.dds_profile and 'FASTRTPS_DEFAULT_PROFILES_FILE' not in os.environ:
+        os.environ['FASTRTPS_DEFAULT_PROFILES_FILE'] = args.dds_profile
 
     found = shutil.which('speed_sign_detector', path=os.pathsep.join(
         [str(Path(sys.executable).parent), os.environ.get('PATH', '')]))
