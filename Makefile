@@ -30,11 +30,11 @@ live-demo: $(INSTALLED)
 	$(BIN)/speed_sign_synth $(OUT)/live-demo/drive --seed 3 --duration 15 --compressed
 	@set -e; export FASTRTPS_DEFAULT_PROFILES_FILE=$(CURDIR)/config/fastdds_large_images.xml; \
 	$(BIN)/speed_sign_detector --ros-args -r image/compressed:=/camera/image_raw/compressed & \
-	node=$$!; trap 'kill -INT $$node $$monitor 2>/dev/null; wait $$node' EXIT; \
+	node=$$!; trap 'kill -INT $$node 2>/dev/null || true; wait $$node || true' EXIT; \
 	$(BIN)/speed_sign_monitor --timeout 120 & monitor=$$!; \
 	$(BIN)/speed_sign_replay $(OUT)/live-demo/drive --restamp --wait 120 -q; \
 	sleep 2; kill -INT $$monitor; wait $$monitor || true; \
-	echo; echo "final state:"; $(BIN)/speed_sign_monitor --once --json --timeout 10
+	echo; echo "final state:"; $(BIN)/speed_sign_monitor --once --json --timeout 3
 
 ## test: the test suite (what .ci/run runs)
 test: $(INSTALLED)
