@@ -34,7 +34,7 @@ live-demo: $(INSTALLED)
 	$(BIN)/speed_sign_monitor --timeout 120 & monitor=$$!; \
 	$(BIN)/speed_sign_replay $(OUT)/live-demo/drive --restamp --wait 120 -q; \
 	sleep 2; kill -INT $$monitor; wait $$monitor || true; \
-	echo; echo "final state:"; $(BIN)/speed_sign_monitor --once --json --timeout 3
+	echo; echo "final state:"; $(BIN)/speed_sign_monitor --once --json --timeout 8
 
 ## test: the test suite (what .ci/run runs)
 test: $(INSTALLED)
