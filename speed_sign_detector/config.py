@@ -210,7 +210,7 @@ class ClassifierConfig:
                                              '(else CLAHE serves detection only).')
     cache_dir: str = setting('~/.cache/speed_sign_detector', 'Folder to cache the built '
                              'filter banks in, keyed by every parameter that shapes them '
-                             '("" = build at every start, ~15-25 s).')
+                             '("" = build at every start, ~3-5 s).')
 
     def __post_init__(self) -> None:
         validate(self)

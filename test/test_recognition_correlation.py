@@ -12,7 +12,11 @@ from speed_sign_detector.recognition.correlation import (
     peak_psr,
     scene_spectrum,
 )
-from speed_sign_detector.recognition.mace import mace_filter, training_spectra
+from speed_sign_detector.recognition.mace import (
+    mace_filter,
+    mace_filters,
+    training_spectra,
+)
 from speed_sign_detector.recognition.templates import GRAY_TEMPLATE_GEOMETRY, gray_views
 
 FFT = (64, 64)
@@ -106,3 +110,22 @@ def test_disc_window_and_keep_inside() -> None:
 def test_training_spectra_rejects_empty_stack() -> None:
     with pytest.raises(ValueError):
         training_spectra(np.zeros((0, 8, 8), np.float32), (8, 8), 0.5)
+
+
+def test_batched_mace_filters_equal_single_ones() -> None:
+    """Filters synthesized together equal those synthesized one by one."""
+    stacks = np.stack([training_spectra(_views(kind), FFT, 0.5) for kind in ('30', '80')])
+    together = mace_filters(stacks, FFT, noise_tradeoff=0.9)
+    assert together.shape == (2, FFT[0], FFT[1] // 2 + 1) and together.dtype == np.complex64
+    for spectra, batched in zip(stacks, together):
+        single = mace_filter(spectra, FFT, noise_tradeoff=0.9)
+        assert np.abs(batched - single).max() <= 1e-5 * np.abs(single).max()
+
+
+def test_training_spectra_do_not_depend_on_the_stack() -> None:
+    """Each image's spectrum is the same in a large stack (chunked FFTs) as alone."""
+    images = np.concatenate([_views('30'), _views('80')])  # 42 images: two chunks
+    stacked = training_spectra(images, FFT, 0.5)
+    for index in (0, 33, 41):
+        np.testing.assert_array_equal(stacked[index],
+                                      training_spectra(images[index:index + 1], FFT, 0.5)[0])

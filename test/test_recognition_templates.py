@@ -12,6 +12,7 @@ from speed_sign_detector.recognition.templates import (
     render_master,
     render_sign,
     views_from_master,
+    views_from_masters,
 )
 
 REQUIRED_KINDS = ([str(v) for v in (5, 10, 20, 30, 40, 50, 60, 70, 80, 90, 100, 110, 120, 130)]
@@ -86,3 +87,25 @@ def test_master_views_match_gray_views() -> None:
     from_master = views_from_master(master, 30.0, 40, [(0, 0, 0)], supersample=4)
     direct = gray_views('80', 30.0, 40, [(0, 0, 0)], geometry=GRAY_TEMPLATE_GEOMETRY)
     assert np.abs(from_master - direct).mean() < 3.0
+
+
+@pytest.mark.parametrize('count', [2, 3])
+def test_batched_master_views_equal_single_ones(count: int) -> None:
+    """One warp over stacked masters gives each master's own views (2 masters included:
+    OpenCV warps 4-channel images on another code path)."""
+    kinds = ['30', 'end_of_limit_80', 'no_overtaking'][:count]
+    masters = [render_master(kind, 256, GRAY_TEMPLATE_GEOMETRY) for kind in kinds]
+    views = [(0.0, 0.0, 0.0), (20.0, -10.0, 6.0), (-30.0, 10.0, -6.0)]
+    batched = views_from_masters(masters, 33.5, 45, views, supersample=1)
+    assert batched.shape == (count, len(views), 45, 45)
+    for master, from_batch in zip(masters, batched):
+        single = views_from_master(master, 33.5, 45, views, supersample=1)
+        np.testing.assert_allclose(from_batch, single, rtol=0, atol=1e-4)
+
+
+def test_batched_master_views_reject_mixed_masters() -> None:
+    with pytest.raises(ValueError):
+        views_from_masters([np.zeros((64, 64, 2), np.float32),
+                            np.zeros((32, 32, 2), np.float32)], 20.0, 30, [(0, 0, 0)])
+    with pytest.raises(ValueError):
+        views_from_masters([], 20.0, 30, [(0, 0, 0)])

@@ -48,11 +48,11 @@ from speed_sign_detector.recognition.correlation import (
     peak_psr,
     scene_spectrum,
 )
-from speed_sign_detector.recognition.mace import mace_filter, training_spectra
+from speed_sign_detector.recognition.mace import mace_filters, training_spectra
 from speed_sign_detector.recognition.templates import (
     GRAY_TEMPLATE_GEOMETRY,
     render_master,
-    views_from_master,
+    views_from_masters,
 )
 
 #: Speed limits the classifier can read, in km/h.
@@ -205,9 +205,33 @@ def _class_views() -> list[tuple[float, float, float]]:
             for pitch in PITCH_VIEWS_DEG]
 
 
+def _keep_inside_each(images: np.ndarray, window: np.ndarray) -> np.ndarray:
+    """:func:`.correlation.keep_inside` of every image of a stack.
+
+    Args:
+        images: (..., h, w) real images.
+        window: (h, w) weights in [0, 1].
+
+    Returns:
+        (..., h, w) float32.
+    """
+    images = np.asarray(images, dtype=np.float32)
+    total = float(window.sum())
+    if total <= 0:
+        return np.stack([keep_inside(image, window) for image in images.reshape(
+            (-1,) + window.shape)]).reshape(images.shape)
+    means = (images * window).sum(axis=(-2, -1), keepdims=True) / np.float32(total)
+    return images * window + means * (1.0 - window)
+
+
 def build_size_bank(radius_px: float, config: ClassifierConfig,
                     masters: dict[str, np.ndarray]) -> SizeBank:
     """Synthesize the detection and classification filters of one sign size.
+
+    Each kind's views are warped once (all kinds in one warp per view), the training
+    spectra of all filters come from one :func:`.mace.training_spectra` call and the
+    filters with the same number of training views are synthesized together
+    (:func:`.mace.mace_filters`).
 
     Args:
         radius_px: sign radius of the templates, pixels.
@@ -219,45 +243,48 @@ def build_size_bank(radius_px: float, config: ClassifierConfig,
     per_roll = len(YAW_VIEWS_DEG) * len(PITCH_VIEWS_DEG)
     supersample = 2 if radius_px < 16.0 else 1
     detection_views = [(yaw, pitch, 0.0) for yaw in YAW_VIEWS_DEG for pitch in PITCH_VIEWS_DEG]
-    detection = np.stack([
-        mace_filter(training_spectra(views_from_master(masters[kind], 2.0 * radius_px, canvas,
-                                                       detection_views,
-                                                       supersample=supersample),
-                                     shape, config.kth_law), shape, config.noise_tradeoff)
-        for kind in DETECTION_KINDS])
-
-    views: dict[str, np.ndarray] = {}  # kind -> (rolls, per_roll, M, M)
-
-    def kind_views(kind: str) -> np.ndarray:
-        if kind not in views:
-            images = views_from_master(masters[kind], 2.0 * radius_px, class_size,
-                                       _class_views(), supersample=supersample)
-            views[kind] = images.reshape(len(ROLLS_DEG), per_roll, class_size, class_size)
-        return views[kind]
+    images = views_from_masters([masters[kind] for kind in DETECTION_KINDS], 2.0 * radius_px,
+                                canvas, detection_views, supersample=supersample)
+    detection = mace_filters(
+        training_spectra(images.reshape(-1, canvas, canvas), shape, config.kth_law).reshape(
+            images.shape[:2] + (fft_size, fft_size // 2 + 1)), shape, config.noise_tradeoff)
 
     # classification templates: only the sign's inner field (digits), the rest set to
     # the field's mean, so the ring and the surroundings (common to all classes) do not
     # drown the digits
+    class_kinds = sorted(set().union(*CLASS_TEMPLATES.values()))
+    kind_index = {kind: index for index, kind in enumerate(class_kinds)}
     shape = (class_size, class_size)
     field = disc_window(shape, (class_size / 2.0, class_size / 2.0),
                         config.class_field_radius * radius_px)
-    spectra: list[np.ndarray] = []
+    views = _keep_inside_each(views_from_masters([masters[kind] for kind in class_kinds],
+                                               2.0 * radius_px, class_size, _class_views(),
+                                               supersample=supersample), field)
+    views = views.reshape(len(class_kinds), len(ROLLS_DEG), per_roll, class_size, class_size)
+    # training images of every filter (name-major, roll-minor), grouped by view count
+    filter_images: list[np.ndarray] = []
     names: list[str] = []
     rolls: list[float] = []
     for name, kinds in CLASS_TEMPLATES.items():
         for roll_index, roll in enumerate(ROLLS_DEG):
             if len(kinds) == 1:
-                images = kind_views(kinds[0])[roll_index]
+                filter_images.append(views[kind_index[kinds[0]], roll_index])
             else:  # several templates in one filter: frontal and +-20 deg yaw views
-                images = np.concatenate([kind_views(kind)[roll_index][_MULTI_KIND_VIEWS]
-                                         for kind in kinds])
-            images = np.stack([keep_inside(image, field) for image in images])
-            spectra.append(mace_filter(training_spectra(images, shape, config.kth_law), shape,
-                                       config.noise_tradeoff))
+                filter_images.append(np.concatenate(
+                    [views[kind_index[kind], roll_index, _MULTI_KIND_VIEWS] for kind in kinds]))
             names.append(name)
             rolls.append(roll)
+    spectra_all = training_spectra(np.concatenate(filter_images), shape, config.kth_law)
+    classification = np.empty((len(filter_images), class_size, class_size // 2 + 1),
+                              np.complex64)
+    offsets = np.cumsum([0] + [len(images) for images in filter_images])
+    counts = np.asarray([len(images) for images in filter_images])
+    for count in np.unique(counts):
+        members = np.flatnonzero(counts == count)
+        group = np.stack([spectra_all[offsets[m]:offsets[m] + count] for m in members])
+        classification[members] = mace_filters(group, shape, config.noise_tradeoff)
     return SizeBank(radius_px, canvas, fft_size, class_size, np.conj(detection),
-                    np.conj(np.stack(spectra)), tuple(names), np.asarray(rolls, np.float32))
+                    np.conj(classification), tuple(names), np.asarray(rolls, np.float32))
 
 
 def _bank_key(config: ClassifierConfig) -> str:

@@ -419,24 +419,66 @@ def views_from_master(master: np.ndarray, diameter_px: float, canvas_px: int,
     Returns:
         (V, canvas_px, canvas_px) float32 gray levels 0..255.
     """
+    return views_from_masters([master], diameter_px, canvas_px, views,
+                              background=background, supersample=supersample)[0]
+
+
+def views_from_masters(masters: Sequence[np.ndarray], diameter_px: float, canvas_px: int,
+                       views: Sequence[tuple[float, float, float]], *,
+                       background: float = 128.0, supersample: int = 2) -> np.ndarray:
+    """:func:`views_from_master` of several signs at once (same result per sign).
+
+    The reduced masters are stacked as channels of one image, so each view is one warp
+    (the interpolation coordinates are computed once for all signs).
+
+    Args:
+        masters: K arrays (S, S, 2) float32 from :func:`render_master` (same S).
+        diameter_px: sign diameter in output pixels (may be fractional, >= 4).
+        canvas_px: side of the square outputs; the sign is centred.
+        views: ``(yaw_deg, pitch_deg, roll_deg)`` per output (see :func:`gray_template`).
+        background: gray level of the background, 0..255.
+        supersample: oversampling of the warp (>= 1).
+
+    Returns:
+        (K, V, canvas_px, canvas_px) float32 gray levels 0..255.
+    """
     if diameter_px < 4:
         raise ValueError(f'diameter_px must be at least 4, got {diameter_px}')
     canvas_px = int(canvas_px)
     if canvas_px < 1:
         raise ValueError(f'canvas_px must be positive, got {canvas_px}')
+    if len(masters) == 0:
+        raise ValueError('masters must hold at least one rendering')
+    shapes = {np.shape(master) for master in masters}
+    if len(shapes) != 1 or len(next(iter(shapes))) != 3 or next(iter(shapes))[2] != 2:
+        raise ValueError(f'masters must all have the same shape (S, S, 2), got {shapes}')
     factor = max(1, int(supersample))
     big_d = int(math.ceil(diameter_px * factor))
     big_canvas = canvas_px * factor
-    stacked = cv2.resize(master, (big_d, big_d), interpolation=cv2.INTER_AREA)
-    out = np.empty((len(views), canvas_px, canvas_px), np.float32)
+    # area reduction per master (cv2.resize takes at most 4 channels), then one
+    # (big_d, big_d, 2K) stack: channels 2k, 2k + 1 are master k's gray and alpha
+    reduced = [cv2.resize(np.asarray(master, np.float32), (big_d, big_d),
+                          interpolation=cv2.INTER_AREA) for master in masters]
+    if len(reduced) == 2:
+        # OpenCV warps 4-channel images on another code path (interpolation rounding
+        # differs from the 2-channel one by up to a few gray levels): pad to 6 channels
+        reduced.append(np.zeros_like(reduced[0]))
+    stacked = np.dstack(reduced)
+    out = np.empty((len(masters), len(views), canvas_px, canvas_px), np.float32)
     scale = diameter_px * factor / big_d
     for index, (yaw, pitch, roll) in enumerate(views):
         homography = _view_homography(big_d, big_canvas, yaw, pitch, roll, scale=scale)
         warped = cv2.warpPerspective(stacked, homography, (big_canvas, big_canvas),
                                      flags=cv2.INTER_LINEAR, borderValue=(0.0, 0.0))
+        warped = warped.reshape(big_canvas, big_canvas, len(reduced), 2)[:, :, :len(masters)]
         composite = warped[..., 0] + (1.0 - warped[..., 1]) * np.float32(background)
-        out[index] = (cv2.resize(composite, (canvas_px, canvas_px),
-                                 interpolation=cv2.INTER_AREA) if factor > 1 else composite)
+        if factor == 1:
+            out[:, index] = composite.transpose(2, 0, 1)
+            continue
+        for sign in range(len(masters)):
+            out[sign, index] = cv2.resize(np.ascontiguousarray(composite[..., sign]),
+                                          (canvas_px, canvas_px),
+                                          interpolation=cv2.INTER_AREA)
     return out
 
 
