@@ -2,14 +2,18 @@
 
 The same maths as :mod:`speed_sign_detector.detection.voting_numpy`, kept on the GPU:
 
-1. the frame is uploaded once as an R8UI texture; a compute shader maps it through the
-   contrast table (linear or log) into level 0 of a float pyramid (2x2 box averages);
-2. per pyramid level, compute shaders take the 3x3 Sobel gradient, mark edge pixels
-   (threshold, non-maximum suppression, neighbour support) and append them to an edge
-   list (SSBO) with ``atomicAdd`` on the vertex count of that level's indirect draw
-   command, so the CPU never sees the edges;
+1. the frame is uploaded once as an R8UI texture; one compute pass maps it through the
+   contrast table (linear or log) into level 0 of a float pyramid and writes levels 1
+   and 2 (2x2 box averages) in the same pass; further levels, if any, get one pass each;
+2. per pyramid level, two compute passes mark edge pixels (3x3 Sobel gradient,
+   threshold, non-maximum suppression into an R32F mask; then neighbour support) and
+   append them to an edge list (SSBO) with ``atomicAdd`` on the vertex count of that
+   level's indirect draw command, so the CPU never sees the edges. Both passes
+   recompute the Sobel gradient from the level instead of storing an RGBA32F gradient
+   image (on llvmpipe the image store costs more than the recomputation);
 3. one indirect draw per group of radius bands (two bands sharing edge and vote levels
-   share an RGBA32F target: RG for the first, BA for the second): the vertex shader reads
+   share an RGBA32F target: RG for the first, BA for the second; a lone band has an
+   RG32F target): the vertex shader reads
    edge ``gl_VertexID / 3`` and emits its vote triangle (apex at the edge pixel, far side
    at the band group's largest radius, half-width ``r tan(pi/8)``); the fragment shader
    drops votes nearer than the smallest radius (so each band gets the trapezoid of the
@@ -48,18 +52,57 @@ from speed_sign_detector.errors import DetectorError
 
 _GROUP = 8
 _VERTICES_PER_EDGE = 3
+_FUSED_LEVELS = 3  # pyramid levels the fused upload pass writes
 
-_CONVERT_SRC = """
+_PYRAMID_SRC = """
 #version 430
 layout(local_size_x = 8, local_size_y = 8) in;
 layout(binding = 0) uniform usampler2D frame;
 layout(r32f, binding = 0) writeonly uniform image2D level0;
-uniform ivec2 size;
+layout(r32f, binding = 1) writeonly uniform image2D level1;
+layout(r32f, binding = 2) writeonly uniform image2D level2;
+uniform ivec2 size0;
+uniform ivec2 size1;
+uniform ivec2 size2;
+uniform int levels;
 uniform float lookup[256];
+// One invocation: a 4x4 block of level 0, its 2x2 block of level 1 and its level-2 pixel
+// (the same 2x2 box averages as the separate downsample pass; 'precise' keeps the compiler
+// from re-associating the sums, so the levels match that pass bit for bit).
 void main() {
     ivec2 p = ivec2(gl_GlobalInvocationID.xy);
-    if (p.x >= size.x || p.y >= size.y) return;
-    imageStore(level0, p, vec4(lookup[texelFetch(frame, p, 0).r]));
+    ivec2 origin = 4 * p;
+    if (origin.x >= size0.x || origin.y >= size0.y) return;
+    float v[16];
+    for (int dy = 0; dy < 4; ++dy) {
+        for (int dx = 0; dx < 4; ++dx) {
+            ivec2 q = origin + ivec2(dx, dy);
+            float value = 0.0;
+            if (q.x < size0.x && q.y < size0.y) {
+                value = lookup[texelFetch(frame, q, 0).r];
+                imageStore(level0, q, vec4(value));
+            }
+            v[4 * dy + dx] = value;
+        }
+    }
+    if (levels < 2) return;
+    float w[4];
+    for (int dy = 0; dy < 2; ++dy) {
+        for (int dx = 0; dx < 2; ++dx) {
+            ivec2 q = 2 * p + ivec2(dx, dy);
+            int i = 8 * dy + 2 * dx;
+            precise float a = v[i] + v[i + 1];
+            precise float b = v[i + 4] + v[i + 5];
+            precise float value = 0.25 * (a + b);
+            if (q.x < size1.x && q.y < size1.y) imageStore(level1, q, vec4(value));
+            w[2 * dy + dx] = value;
+        }
+    }
+    if (levels < 3 || p.x >= size2.x || p.y >= size2.y) return;
+    precise float a = w[0] + w[1];
+    precise float b = w[2] + w[3];
+    precise float value = 0.25 * (a + b);
+    imageStore(level2, p, vec4(value));
 }
 """
 
@@ -79,40 +122,38 @@ void main() {
 }
 """
 
-_GRADIENT_SRC = """
-#version 430
-layout(local_size_x = 8, local_size_y = 8) in;
+# The 3x3 Sobel gradient of a pyramid level, recomputed where it is needed (writing an
+# RGBA32F gradient image costs llvmpipe more than the eight loads); 'precise' keeps every
+# call site bit-identical.
+_SOBEL_GLSL = """
 layout(r32f, binding = 0) readonly uniform image2D level;
-layout(rgba32f, binding = 1) writeonly uniform image2D gradient;
-uniform ivec2 size;
 float at(ivec2 p) { return imageLoad(level, p).r; }
-void main() {
-    ivec2 p = ivec2(gl_GlobalInvocationID.xy);
-    if (p.x >= size.x || p.y >= size.y) return;
-    if (p.x == 0 || p.y == 0 || p.x == size.x - 1 || p.y == size.y - 1) {
-        imageStore(gradient, p, vec4(0.0));
-        return;
-    }
+// (gx, gy, magnitude) at an inner pixel p.
+vec3 sobel(ivec2 p) {
     float tl = at(p + ivec2(-1, -1)), tc = at(p + ivec2(0, -1)), tr = at(p + ivec2(1, -1));
     float ml = at(p + ivec2(-1, 0)), mr = at(p + ivec2(1, 0));
     float bl = at(p + ivec2(-1, 1)), bc = at(p + ivec2(0, 1)), br = at(p + ivec2(1, 1));
-    float gx = ((tr - tl) + 2.0 * (mr - ml)) + (br - bl);
-    float gy = ((bl - tl) + 2.0 * (bc - tc)) + (br - tr);
-    imageStore(gradient, p, vec4(gx, gy, sqrt(gx * gx + gy * gy), 0.0));
+    precise float gx = ((tr - tl) + 2.0 * (mr - ml)) + (br - bl);
+    precise float gy = ((bl - tl) + 2.0 * (bc - tc)) + (br - tr);
+    precise float magnitude = sqrt(gx * gx + gy * gy);
+    return vec3(gx, gy, magnitude);
 }
 """
 
 _RIDGE_SRC = """
 #version 430
 layout(local_size_x = 8, local_size_y = 8) in;
-layout(rgba32f, binding = 1) readonly uniform image2D gradient;
+SOBEL
 layout(r32f, binding = 2) writeonly uniform image2D ridge;
 uniform ivec2 size;
 uniform float threshold;
 uniform bool thin;
+bool inner(ivec2 p) { return p.x >= 1 && p.y >= 1 && p.x < size.x - 1 && p.y < size.y - 1; }
+// magnitude at p (0 on the frame border, where the gradient is not taken)
+float magnitude_at(ivec2 p) { return inner(p) ? sobel(p).z : 0.0; }
 bool is_ridge(ivec2 p) {
-    if (p.x < 1 || p.y < 1 || p.x >= size.x - 1 || p.y >= size.y - 1) return false;
-    vec4 g = imageLoad(gradient, p);
+    if (!inner(p)) return false;
+    vec3 g = sobel(p);
     if (!(g.z >= threshold)) return false;
     if (!thin) return true;
     float ax = abs(g.x), ay = abs(g.y);
@@ -122,8 +163,8 @@ bool is_ridge(ivec2 p) {
     else if (ax <= tan22 * ay) d = ivec2(0, 1);
     else if (g.x * g.y > 0.0) d = ivec2(1, 1);
     else d = ivec2(-1, 1);
-    float m_ahead = imageLoad(gradient, p + d).z;
-    float m_behind = imageLoad(gradient, p - d).z;
+    float m_ahead = magnitude_at(p + d);
+    float m_behind = magnitude_at(p - d);
     return g.z > m_behind && g.z >= m_ahead;
 }
 void main() {
@@ -131,12 +172,12 @@ void main() {
     if (p.x >= size.x || p.y >= size.y) return;
     imageStore(ridge, p, vec4(is_ridge(p) ? 1.0 : 0.0));
 }
-"""
+""".replace('SOBEL', _SOBEL_GLSL)
 
 _EDGES_SRC = """
 #version 430
 layout(local_size_x = 8, local_size_y = 8) in;
-layout(rgba32f, binding = 1) readonly uniform image2D gradient;
+SOBEL
 layout(r32f, binding = 2) readonly uniform image2D ridge;
 layout(std430, binding = 0) buffer Command { uint command[4]; };
 layout(std430, binding = 1) writeonly buffer Edges { vec4 edges[]; };
@@ -148,7 +189,7 @@ void main() {
     ivec2 p = ivec2(gl_GlobalInvocationID.xy);
     if (p.x < 1 || p.y < 1 || p.x >= size.x - 1 || p.y >= size.y - 1) return;
     if (imageLoad(ridge, p).r == 0.0) return;
-    vec4 g = imageLoad(gradient, p);
+    vec3 g = sobel(p);
     vec2 direction = g.xy / g.z;
     if (min_support > 0) {
         int support = 0;
@@ -156,7 +197,7 @@ void main() {
             for (int dx = -1; dx <= 1; ++dx) {
                 ivec2 q = p + ivec2(dx, dy);
                 if ((dx == 0 && dy == 0) || imageLoad(ridge, q).r == 0.0) continue;
-                vec4 h = imageLoad(gradient, q);
+                vec3 h = sobel(q);
                 if (dot(direction, h.xy / h.z) >= support_cosine) support += 1;
             }
         }
@@ -165,7 +206,7 @@ void main() {
     uint index = atomicAdd(command[0], vertices_per_edge) / vertices_per_edge;
     edges[index] = vec4(vec2(p), direction);
 }
-"""
+""".replace('SOBEL', _SOBEL_GLSL)
 
 _VOTE_VERTEX_SRC = """
 #version 430
@@ -276,7 +317,6 @@ class _LevelResources:
     width_px: int
     height_px: int
     image: object
-    gradient: object
     ridge: object
     edges: object
     command: object
@@ -287,7 +327,8 @@ class _DrawGroup:
     """One or two adjacent bands with the same edge and vote levels: one draw.
 
     The RGBA32F target holds ``(sum w, n)`` of the first band in RG and of the second
-    in BA; the fragment shader routes a vote by its distance.
+    in BA; the fragment shader routes a vote by its distance. A group of one band has
+    an RG32F target (half the blending work).
     """
 
     bands: tuple[RadiusBand, ...]
@@ -329,9 +370,8 @@ class GLVoter:
                                 ) from err
         try:
             self.renderer = str(self._ctx.info['GL_RENDERER'])
-            self._convert = self._ctx.compute_shader(_CONVERT_SRC)
+            self._pyramid = self._ctx.compute_shader(_PYRAMID_SRC)
             self._downsample = self._ctx.compute_shader(_DOWNSAMPLE_SRC)
-            self._gradient = self._ctx.compute_shader(_GRADIENT_SRC)
             self._ridge = self._ctx.compute_shader(_RIDGE_SRC)
             self._extract = self._ctx.compute_shader(_EDGES_SRC)
             self._reduce = self._ctx.compute_shader(_REDUCE_SRC)
@@ -345,7 +385,7 @@ class GLVoter:
         except Exception as err:
             self._ctx.release()
             raise DetectorError(f'GL voting shaders failed to build: {err}') from err
-        self._convert['lookup'].write(gray_lookup(config.contrast,
+        self._pyramid['lookup'].write(gray_lookup(config.contrast,
                                                   config.log_offset_gray).tobytes())
         self._thread_id = threading.get_ident()
         self._size: tuple[int, int] | None = None
@@ -408,8 +448,8 @@ class GLVoter:
             self._run_votes(gray)
             for group in self._groups:
                 width, height = group.target.size
-                pixels = np.frombuffer(group.target.read(), np.float32).reshape(height, width,
-                                                                                4)
+                pixels = np.frombuffer(group.target.read(), np.float32).reshape(
+                    height, width, group.target.components)
                 for slot in range(len(group.bands)):
                     images.append(pixels[..., CHANNELS * slot:CHANNELS * (slot + 1)].copy())
         return images
@@ -435,7 +475,6 @@ class GLVoter:
             self._levels.append(_LevelResources(
                 level_width, level_height,
                 image=ctx.texture((level_width, level_height), 1, dtype='f4'),
-                gradient=ctx.texture((level_width, level_height), 4, dtype='f4'),
                 ridge=ctx.texture((level_width, level_height), 1, dtype='f4'),
                 edges=ctx.buffer(reserve=16 * level_width * level_height),
                 command=ctx.buffer(reserve=16)))
@@ -443,7 +482,7 @@ class GLVoter:
         self._groups = []
         for bands in _draw_groups(self._config, self._bands):
             size = level_size(width, height, bands[0].target_level)
-            target = ctx.texture(size, 4, dtype='f4')
+            target = ctx.texture(size, CHANNELS * len(bands), dtype='f4')
             self._groups.append(_DrawGroup(bands, target,
                                            ctx.framebuffer(color_attachments=[target])))
         block = self._config.block_size_px
@@ -454,7 +493,7 @@ class GLVoter:
     def _release_size_resources(self) -> None:
         objects = [self._frame, self._blocks]
         for level in self._levels:
-            objects += [level.image, level.gradient, level.ridge, level.edges, level.command]
+            objects += [level.image, level.ridge, level.edges, level.command]
         for group in self._groups:
             objects += [group.framebuffer, group.target]
         for item in objects:
@@ -478,11 +517,18 @@ class GLVoter:
         ctx = self._ctx
         self._frame.write(gray.tobytes())
         self._frame.use(0)
-        self._levels[0].image.bind_to_image(0, read=False, write=True)
-        self._convert['size'] = (width, height)
-        self._convert.run(_groups(width), _groups(height))
+        fused = self._levels[:_FUSED_LEVELS]
+        # with fewer levels the spare units repeat the last level; 'levels' stops the
+        # shader before it writes them
+        for unit in range(_FUSED_LEVELS):
+            fused[min(unit, len(fused) - 1)].image.bind_to_image(unit, read=False, write=True)
+        for unit, name in enumerate(('size0', 'size1', 'size2')):
+            level = fused[min(unit, len(fused) - 1)]
+            self._pyramid[name] = (level.width_px, level.height_px)
+        self._pyramid['levels'] = len(fused)
+        self._pyramid.run(_groups(-(-width // 4)), _groups(-(-height // 4)))
         ctx.memory_barrier()
-        for finer, coarser in zip(self._levels, self._levels[1:]):
+        for finer, coarser in zip(self._levels[_FUSED_LEVELS - 1:], self._levels[_FUSED_LEVELS:]):
             finer.image.bind_to_image(0, read=True, write=False)
             coarser.image.bind_to_image(1, read=False, write=True)
             self._downsample['size'] = (coarser.width_px, coarser.height_px)
@@ -496,13 +542,7 @@ class GLVoter:
         self._ridge['thin'] = bool(self._config.thin_edges)
         for level in self._levels:
             level.image.bind_to_image(0, read=True, write=False)
-            level.gradient.bind_to_image(1, read=False, write=True)
-            self._gradient['size'] = (level.width_px, level.height_px)
-            self._gradient.run(_groups(level.width_px), _groups(level.height_px))
-            ctx.memory_barrier()
-            self._stage('gradient')
             level.command.write(np.array([0, 1, 0, 0], np.uint32).tobytes())
-            level.gradient.bind_to_image(1, read=True, write=False)
             level.ridge.bind_to_image(2, read=False, write=True)
             self._ridge['size'] = (level.width_px, level.height_px)
             self._ridge.run(_groups(level.width_px), _groups(level.height_px))
