@@ -595,7 +595,6 @@ class BagWriter:
         self._connections: dict[str, Any] = {}
         self._seq = 0
         self._closed = False
-        self.message_count = 0
 
     @property
     def is_ros2(self) -> bool:
@@ -646,18 +645,6 @@ class BagWriter:
             self._writer.write(connection, int(log_time_ns), data)
         except (Ros1WriterError, Ros2WriterError, OSError) as err:
             raise BagError(f'cannot write to {self.path}: {err}') from err
-        self.message_count += 1
-
-    def write_raw(self, topic: str, log_time_ns: int, data: bytes) -> None:
-        """Write an already serialized message (same format as the bag)."""
-        connection = self._connections.get(topic)
-        if connection is None:
-            raise BagError(f'topic {topic} was not added to {self.path}')
-        try:
-            self._writer.write(connection, int(log_time_ns), data)
-        except (Ros1WriterError, Ros2WriterError, OSError) as err:
-            raise BagError(f'cannot write to {self.path}: {err}') from err
-        self.message_count += 1
 
     def close(self) -> None:
         """Finish the bag (index, metadata); safe to call twice."""

@@ -13,11 +13,9 @@ import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
 from speed_sign_detector.errors import ConfigError
-
-ConfigT = TypeVar('ConfigT')
 
 
 def setting(default: Any, description: str, *, low: float | None = None,

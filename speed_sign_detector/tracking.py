@@ -175,14 +175,14 @@ class Tracker:
         recognized_limit_kmh = 0
         recognized_end = False
         claimed: set[int] = set()
-        signs = [(candidate, classification) for candidate, classification in observations
+        signs = [classification for _, classification in observations
                  if classification is not None and classification.label != LABEL_NO_SIGN]
         # Strongest observations pick their tracks first.
-        signs.sort(key=lambda pair: -pair[1].psr)
-        for candidate, classification in signs:
-            track = self._associate(candidate, classification, stamp_s, claimed)
+        signs.sort(key=lambda classification: -classification.psr)
+        for classification in signs:
+            track = self._associate(classification, stamp_s, claimed)
             claimed.add(track.track_id)
-            self._observe(track, candidate, classification, stamp_s)
+            self._observe(track, classification, stamp_s)
             decided = self._decide(track)
             if decided is None:
                 continue
@@ -202,8 +202,8 @@ class Tracker:
             if stamp_s - track.last_stamp_s <= config.window_s
             and self._frame_index - track.last_frame_index <= config.window_frames]
 
-    def _associate(self, candidate: Candidate, classification: Classification,
-                   stamp_s: float, claimed: set[int]) -> _Track:
+    def _associate(self, classification: Classification, stamp_s: float,
+                   claimed: set[int]) -> _Track:
         x_px, y_px = classification.x_px, classification.y_px
         best: _Track | None = None
         best_distance = math.inf
@@ -224,8 +224,7 @@ class Tracker:
         self._tracks.append(track)
         return track
 
-    def _observe(self, track: _Track, candidate: Candidate, classification: Classification,
-                 stamp_s: float) -> None:
+    def _observe(self, track: _Track, classification: Classification, stamp_s: float) -> None:
         config = self.config
         track.forget_votes_before(self._frame_index - config.window_frames + 1,
                                   stamp_s - config.window_s)
