@@ -45,6 +45,8 @@ class FrameResult:
         recognized_limit_kmh: a limit newly recognized in this frame, 0 when none.
         timings_ms: stage durations in milliseconds: ``detect``, ``classify``,
             ``track``, ``total``.
+        tracks_reset: True when the frame's time jumped back (a restarted source) and
+            the tracker started afresh.
     """
 
     stamp_s: float
@@ -55,6 +57,7 @@ class FrameResult:
     active_limit_kmh: int
     recognized_limit_kmh: int
     timings_ms: Mapping[str, float]
+    tracks_reset: bool = False
 
 
 class Pipeline:
@@ -132,7 +135,8 @@ class Pipeline:
             timings_ms={'detect': (detected - started) * 1e3,
                         'classify': (classified - detected) * 1e3,
                         'track': (tracked - classified) * 1e3,
-                        'total': (tracked - started) * 1e3})
+                        'total': (tracked - started) * 1e3},
+            tracks_reset=update.tracks_reset)
 
     def reconfigure(self, config: PipelineConfig) -> None:
         """Apply a new config, rebuilding only the stages whose settings changed.

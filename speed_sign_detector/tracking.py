@@ -35,6 +35,10 @@ from speed_sign_detector.recognition.classifier import (
 
 #: Relative size change under which a sign counts as neither growing nor shrinking.
 SIZE_CHANGE_TOLERANCE = 0.03
+#: A frame this many seconds older than the previous one means the source restarted
+#: (a bag replayed again): the tracker resets. Smaller steps back (frames slightly out
+#: of order) are integrated as they come.
+RESTART_JUMP_BACK_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -75,12 +79,15 @@ class TrackerUpdate:
         active_limit_kmh: the limit in force, 0 when none is known.
         recognized_limit_kmh: a limit recognized in this frame, 0 when none.
         recognized_end_of_limit: True when an end-of-limit sign was recognized now.
+        tracks_reset: True when this frame's time jumped back more than
+            :data:`RESTART_JUMP_BACK_S` and the tracker started afresh.
     """
 
     tracks: tuple[TrackState, ...]
     active_limit_kmh: int
     recognized_limit_kmh: int
     recognized_end_of_limit: bool
+    tracks_reset: bool = False
 
 
 @dataclass
@@ -156,8 +163,9 @@ class Tracker:
         """Integrate one frame's classified candidates.
 
         Args:
-            stamp_s: message time of the frame, seconds. A time earlier than the previous
-                frame's resets the tracker (a replay restarted).
+            stamp_s: message time of the frame, seconds. A time more than
+                :data:`RESTART_JUMP_BACK_S` before the previous frame's resets the
+                tracker (a replay restarted).
             observations: (candidate, classification) pairs; pairs without a
                 classification or answered ``'no_sign'`` are ignored.
 
@@ -166,7 +174,9 @@ class Tracker:
         """
         if not math.isfinite(stamp_s):
             raise ValueError(f'stamp_s must be a finite number of seconds, got {stamp_s}')
-        if self._last_stamp_s is not None and stamp_s < self._last_stamp_s:
+        tracks_reset = (self._last_stamp_s is not None
+                        and stamp_s < self._last_stamp_s - RESTART_JUMP_BACK_S)
+        if tracks_reset:
             self.reset()
         self._frame_index += 1
         self._last_stamp_s = stamp_s
@@ -193,7 +203,8 @@ class Tracker:
                 recognized_limit_kmh = int(decided)
                 self.active_limit_kmh = recognized_limit_kmh
         return TrackerUpdate(tuple(track.snapshot() for track in self._tracks),
-                             self.active_limit_kmh, recognized_limit_kmh, recognized_end)
+                             self.active_limit_kmh, recognized_limit_kmh, recognized_end,
+                             tracks_reset)
 
     def _expire(self, stamp_s: float) -> None:
         config = self.config

@@ -13,8 +13,7 @@ import pytest
 from speed_sign_detector.config import DetectorConfig
 from speed_sign_detector.detection.candidates import Candidate
 from speed_sign_detector.detection.detector import Detector
-from speed_sign_detector.errors import InvalidFrameError
-from speed_sign_detector.errors import ConfigError, DetectorError
+from speed_sign_detector.errors import ConfigError, DetectorError, InvalidFrameError
 
 SUPERSAMPLE = 8
 BACKGROUND_GRAY = 110

@@ -126,7 +126,17 @@ def test_time_going_backwards_resets() -> None:
     approach(tracker, '120', frames=5, start_s=10.0)
     assert tracker.active_limit_kmh == 120
     update = tracker.update(0.0, [])
+    assert update.tracks_reset
     assert update.active_limit_kmh == 0 and update.tracks == ()
+
+
+def test_a_frame_slightly_out_of_order_keeps_the_tracks() -> None:
+    tracker = Tracker(TrackerConfig(recognition_threshold=25.0))
+    approach(tracker, '120', frames=5, start_s=10.0)
+    update = tracker.update(10.0, [observation('120', 308.0, 200.0, 14.0)])
+    assert not update.tracks_reset
+    assert update.active_limit_kmh == 120
+    assert len(update.tracks) == 1 and update.tracks[0].observations == 6
 
 
 def test_non_finite_stamp_is_rejected() -> None:

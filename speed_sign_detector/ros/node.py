@@ -76,9 +76,6 @@ from speed_sign_detector.ros.messages import (
 NODE_NAME = 'speed_sign_detector'
 #: Latency samples kept for the percentiles in the diagnostics.
 LATENCY_WINDOW = 300
-#: A stamp this far (seconds) before the previous frame's means a restarted source:
-#: the pipeline's tracks are reset.
-STAMP_JUMP_BACK_S = 1.0
 
 
 #: Parameters that cannot change while the node runs.
@@ -465,7 +462,6 @@ class SpeedSignDetectorNode(Node):
             self._worker_ready.set()
             return
         self._worker_ready.set()
-        previous_stamp_s: float | None = None
         try:
             while True:
                 with self._condition:
@@ -479,7 +475,7 @@ class SpeedSignDetectorNode(Node):
                 if config is not None:
                     self._reconfigure(pipeline, config)
                 if frame is not None:
-                    previous_stamp_s = self._process(pipeline, frame, previous_stamp_s)
+                    self._process(pipeline, frame)
         finally:
             pipeline.close()
 
@@ -493,25 +489,23 @@ class SpeedSignDetectorNode(Node):
         self._fallback_reason = pipeline.fallback_reason
         self.get_logger().info(f'parameters applied (backend {self._backend})')
 
-    def _process(self, pipeline: Pipeline, frame: ReceivedFrame,
-                 previous_stamp_s: float | None) -> float | None:
-        """Convert, run and publish one frame; returns its stamp (or the previous one)."""
+    def _process(self, pipeline: Pipeline, frame: ReceivedFrame) -> None:
+        """Convert, run and publish one frame (a bad one is counted and logged)."""
         header = frame.message.header
         stamp_ns = header.stamp.sec * 1_000_000_000 + header.stamp.nanosec
         stamp_s = stamp_ns * 1e-9 if stamp_ns > 0 else frame.received_ns * 1e-9
         try:
             gray = message_to_gray(frame.message)
-            if previous_stamp_s is not None and stamp_s < previous_stamp_s - STAMP_JUMP_BACK_S:
-                self.get_logger().info(f'image stamps jumped back by '
-                                       f'{previous_stamp_s - stamp_s:.1f} s: tracks reset')
-                pipeline.reset()
             result = pipeline.process(gray, stamp_s)
         except (ImageConversionError, ValueError) as err:
             self._reject(frame, str(err))
-            return previous_stamp_s
+            return
         except Exception as err:  # noqa: BLE001 - one bad frame must not stop the node
             self._reject(frame, f'{type(err).__name__}: {err}')
-            return previous_stamp_s
+            return
+        if result.tracks_reset:
+            self.get_logger().info('image stamps jumped back (a restarted source): '
+                                   'tracks and the active limit were reset')
         self._publish(gray, result, header)
         done = time.monotonic()
         with self._stats.lock:
@@ -523,7 +517,6 @@ class SpeedSignDetectorNode(Node):
                     stage, deque(maxlen=LATENCY_WINDOW)).append(duration_ms)
             if stamp_ns > 0:
                 self._stats.stamp_latency_ms.append((frame.received_ns - stamp_ns) * 1e-6)
-        return stamp_s
 
     def _publish(self, gray: np.ndarray, result: FrameResult, header: Header) -> None:
         self._candidates_pub.publish(candidates_message(
