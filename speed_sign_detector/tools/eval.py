@@ -16,13 +16,13 @@ bad command-line usage.
 from __future__ import annotations
 
 import argparse
-import importlib
 import logging
 import sys
 
 from speed_sign_detector.errors import SpeedSignError
+from speed_sign_detector.tools import eval_bag, eval_crops, eval_scenes
 
-SUBCOMMAND_MODULES = ('eval_scenes', 'eval_crops', 'eval_bag')
+SUBCOMMAND_MODULES = (eval_scenes, eval_crops, eval_bag)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -32,13 +32,7 @@ def build_parser() -> argparse.ArgumentParser:
         'recognition on scenes, crops or bags.')
     parser.add_argument('-v', '--verbose', action='store_true', help='debug logging on stderr')
     subparsers = parser.add_subparsers(dest='command', required=True, metavar='{scenes,crops,bag}')
-    for module_name in SUBCOMMAND_MODULES:
-        try:
-            module = importlib.import_module(f'speed_sign_detector.tools.{module_name}')
-        except ModuleNotFoundError as err:
-            if err.name != f'speed_sign_detector.tools.{module_name}':
-                raise
-            continue
+    for module in SUBCOMMAND_MODULES:
         module.register(subparsers)
     return parser
 
