@@ -91,6 +91,52 @@ def _radsym_method(kind: str) -> Method:
     return run
 
 
+_FLOOR_SHADER = """
+#version 430
+layout(local_size_x = 8, local_size_y = 8) in;
+layout(binding = 0) uniform usampler2D frame;
+layout(std430, binding = 0) writeonly buffer Blocks { vec4 blocks[]; };
+uniform ivec2 size;
+void main() {
+    ivec2 p = ivec2(gl_GlobalInvocationID.xy);
+    if (p.x >= size.x || p.y >= size.y || p.x % 8 != 0 || p.y % 8 != 0) return;
+    blocks[2 * ((p.y / 8) * ((size.x + 7) / 8) + p.x / 8)] = vec4(texelFetch(frame, p, 0).r);
+}
+"""
+
+
+def gl_floor_ms(width: int, height: int, repeats: int = 100) -> float:
+    """Median ms of the least any GL detector does per frame on this renderer.
+
+    Uploads a (height, width) uint8 frame, runs one trivial compute pass over it and
+    reads back a block list as large as the detector's (32 bytes per 8x8 block): no
+    gradients, no votes. A GL detector cannot be faster than this on the same renderer.
+    """
+    import moderngl
+
+    ctx = moderngl.create_standalone_context(backend='egl', require=430)
+    try:
+        frame = ctx.texture((width, height), 1, dtype='u1')
+        blocks = ctx.buffer(reserve=32 * (-(-width // 8)) * (-(-height // 8)))
+        shader = ctx.compute_shader(_FLOOR_SHADER)
+        shader['size'] = (width, height)
+        pixels = np.random.default_rng(0).integers(0, 256, (height, width), np.uint8)
+        times = []
+        for index in range(repeats + 1):
+            start = time.perf_counter()
+            frame.write(pixels.tobytes())
+            frame.use(0)
+            blocks.bind_to_storage_buffer(0)
+            shader.run(-(-width // 8), -(-height // 8))
+            ctx.memory_barrier()
+            blocks.read()
+            if index:  # the first run compiles the shader
+                times.append(1e3 * (time.perf_counter() - start))
+        return statistics.median(times)
+    finally:
+        ctx.release()
+
+
 def _detector_method(detector: Detector) -> Method:
     def run(gray: np.ndarray) -> Centres:
         return [(c.x_px, c.y_px) for c in detector.detect(gray)]

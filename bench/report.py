@@ -25,7 +25,9 @@ from typing import Any
 import numpy as np
 
 METHOD_LABELS: dict[str, str] = {
-    'gl': 'ours, GL voting',
+    'gl': 'ours, GL (default)',
+    'gl_raster': 'ours, GL raster (paper)',
+    'gl_scatter': 'ours, GL scatter',
     'numpy': 'ours, numpy reference',
     'hough_gradient': 'cv2 HOUGH_GRADIENT',
     'hough_gradient_alt': 'cv2 HOUGH_GRADIENT_ALT',
@@ -72,7 +74,8 @@ def _detector_lines(detector: Mapping[str, Any]) -> list[str]:
               f"candidates; recall = a candidate centre within max(3, 0.35 r) px of the sign"),
              f"GL renderer: {detector['renderer']}"
              + (' (software rasterizer on the CPU: no GPU figure)'
-                if detector.get('software_renderer') else ' (hardware)')]
+                if detector.get('software_renderer') else ' (hardware)')
+             + f"; default vote method: {detector.get('gl_vote_method', '?')}"]
     header = f"{'method':<24}"
     for name, size in sizes.items():
         header += f"{name + ' ms':>13}" + (f"{'recall':>8}" if size['signs'] is not None else '')
@@ -93,7 +96,7 @@ def _detector_lines(detector: Mapping[str, Any]) -> list[str]:
     for name, size in sizes.items():
         rows = size['methods']
         gl = rows['gl']
-        peers = [m for m in rows if m not in ('gl', 'numpy')]
+        peers = [m for m in rows if not m.startswith('gl') and m != 'numpy']
         fastest = min(peers, key=lambda m: rows[m]['median_ms'])
         text = (f"  {name}: GL {_number(gl['median_ms'])} ms; fastest peer "
                 f"{METHOD_LABELS.get(fastest, fastest)} {_number(rows[fastest]['median_ms'])} "
@@ -110,6 +113,10 @@ def _detector_lines(detector: Mapping[str, Any]) -> list[str]:
                 text += (f"; no peer within 0.05 of GL's recall {gl['recall']:.3f} (best peer "
                          f"{METHOD_LABELS.get(top, top)} {rows[top]['recall']:.3f})")
         lines.append(text)
+        if size.get('gl_floor_ms') is not None:
+            lines.append(f"    GL floor at {name} (frame upload, one trivial compute pass, "
+                         f"block list read back): {_number(size['gl_floor_ms'], 2)} ms; half the "
+                         f"fastest peer's time: {_number(rows[fastest]['median_ms'] / 2, 2)} ms")
     native = next((name for name, size in sizes.items() if size['how'] == 'native'), None)
     if native and sizes[native]['signs_by_radius_px']:
         counts = sizes[native]['signs_by_radius_px']

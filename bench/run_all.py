@@ -80,6 +80,7 @@ from speed_sign_detector.config import (
     to_parameters,
 )
 from speed_sign_detector.detection.detector import Detector
+from speed_sign_detector.detection.voting_gl import SOFTWARE_RENDERERS
 from speed_sign_detector.detection.voting_numpy import compute_edges
 from speed_sign_detector.errors import SpeedSignError
 from speed_sign_detector.pipeline import Pipeline
@@ -107,8 +108,6 @@ DETECTOR_SIZES: tuple[tuple[str, int, int, str, bool], ...] = (
     ('1920x1080', 1920, 1080, 'resize', False),
 )
 OUR_METHODS = ('gl', 'numpy')
-#: GL_RENDERER substrings of Mesa's CPU rasterizers: GL figures from them are CPU figures.
-SOFTWARE_RENDERERS = ('llvmpipe', 'softpipe', 'swrast', 'software')
 PEER_METHODS = ('hough_gradient', 'hough_gradient_alt', 'radsym_rsd', 'radsym_frst')
 
 #: The papers' headline figures: quoted from /work/shared/papers, NOT measured here.
@@ -240,16 +239,23 @@ def _in_bin_order(counts: dict[str, int]) -> dict[str, int]:
 
 def detector_methods(config: DetectorConfig) -> tuple[dict[str, bench_detector.Method],
                                                       list[Detector]]:
-    """Every detector method by name, and our Detector objects (to close)."""
+    """Every detector method by name, and our Detector objects (to close).
+
+    ``gl`` is the config as given (``vote_method='auto'`` picks scatter on a software
+    renderer, raster on a GPU); ``gl_raster`` or ``gl_scatter`` is the other vote method.
+    """
     gl = Detector(config, backend='gl')
+    other_method = 'raster' if gl.vote_method == 'scatter' else 'scatter'
+    other = Detector(dataclasses.replace(config, vote_method=other_method), backend='gl')
     numpy_detector = Detector(config, backend='numpy')
     methods = {'gl': bench_detector._detector_method(gl),
+               f'gl_{other_method}': bench_detector._detector_method(other),
                'numpy': bench_detector._detector_method(numpy_detector),
                'hough_gradient': bench_detector.hough_gradient,
                'hough_gradient_alt': bench_detector.hough_gradient_alt,
                'radsym_rsd': bench_detector._radsym_method('rsd'),
                'radsym_frst': bench_detector._radsym_method('frst')}
-    return methods, [gl, numpy_detector]
+    return methods, [gl, other, numpy_detector]
 
 
 def detector_stage(settings: BenchSettings) -> dict[str, object]:
@@ -269,6 +275,7 @@ def detector_stage(settings: BenchSettings) -> dict[str, object]:
     renderer = detectors[0].renderer
     result: dict[str, object] = {
         'renderer': renderer, 'backend_gl': detectors[0].backend_name,
+        'gl_vote_method': detectors[0].vote_method,
         'software_renderer': any(name in renderer.lower() for name in SOFTWARE_RENDERERS),
         'config': dataclasses.asdict(config), 'frames_available': len(limit_files),
         'top_n': bench_detector.TOP_N, 'peer_radius_px': [bench_detector.MIN_RADIUS_PX,
@@ -321,6 +328,7 @@ def detector_stage(settings: BenchSettings) -> dict[str, object]:
                 else None, 'methods': rows}
             fastest = min(PEER_METHODS, key=lambda m: rows[m]['median_ms'])
             result['sizes'][size_name]['fastest_peer'] = fastest
+            result['sizes'][size_name]['gl_floor_ms'] = bench_detector.gl_floor_ms(width, height)
             _log(f'detector {size_name}: {len(size_files)} frames, {signs_total} signs, '
                  f'{time.perf_counter() - started:.0f} s; ' + ', '.join(
                      f'{m} {rows[m]["median_ms"]:.0f} ms' for m in methods))

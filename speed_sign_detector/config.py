@@ -122,6 +122,13 @@ class DetectorConfig:
                                               'the red ring, about 0.7 of the outer radius on '
                                               'GTSDB); 0.66 (StVO ring proportion) = the '
                                               'outer radius.', low=0.1, high=1.0)
+    vote_method: str = setting('auto', 'How the GL backend adds the votes: raster (the '
+                               'paper: one triangle per edge, additive blending into float '
+                               'targets), scatter (a compute pass adds each edge\'s '
+                               'trapezoid to integer images with atomics; same votes, '
+                               'bit-reproducible), or auto (scatter on software renderers '
+                               'such as llvmpipe, whose triangle setup runs on one thread; '
+                               'raster on GPUs).', choices=('auto', 'raster', 'scatter'))
     suppression_factor: float = setting(1.0, 'Non-maximum suppression: a candidate closer '
                                         'than this many voting radii (the larger of the '
                                         'two) to a better one is the same sign and dropped.',

@@ -81,7 +81,8 @@ class Pipeline:
         self._classifier: Classifier | None = (Classifier(self.config.classifier)
                                                if self.config.classify else None)
         self._tracker = Tracker(self.config.tracker)
-        LOGGER.info('pipeline ready: backend %s (%s)%s', self.backend_name, self.renderer,
+        LOGGER.info('pipeline ready: backend %s (%s), %s voting%s', self.backend_name,
+                    self.renderer, self.vote_method,
                     f', fell back because {self.fallback_reason}' if self.fallback_reason
                     else '')
 
@@ -94,6 +95,11 @@ class Pipeline:
     def renderer(self) -> str:
         """The GL renderer string, or a description of the numpy reference."""
         return self._live_detector().renderer
+
+    @property
+    def vote_method(self) -> str:
+        """How votes are added: ``'raster'`` or ``'scatter'`` (GL), ``'numpy'``."""
+        return self._live_detector().vote_method
 
     @property
     def fallback_reason(self) -> str | None:

@@ -72,8 +72,13 @@ def test_detector_section_has_every_method_size_and_sweep(results: dict) -> None
     detector = results['returned']['detector']
     assert set(detector['sizes']) == {'640x480', '816x480'}
     for size in detector['sizes'].values():
-        assert set(size['methods']) == METHODS
+        other_vote_method = {'scatter': 'gl_raster', 'raster': 'gl_scatter'}[
+            detector['gl_vote_method']]
+        assert set(size['methods']) == METHODS | {other_vote_method}
         assert size['frames'] == 2 and size['signs'] >= 2
+        assert 0.0 < size['gl_floor_ms'] < size['methods']['gl']['median_ms']
+        # both vote methods add the same votes: the same signs are found
+        assert size['methods'][other_vote_method]['recall'] == size['methods']['gl']['recall']
         for row in size['methods'].values():
             assert row['median_ms'] > 0
             assert 0.0 <= row['recall'] <= 1.0

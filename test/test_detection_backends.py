@@ -1,6 +1,7 @@
 """The GL backend computes the numpy reference's maths (up to rasterization rules)."""
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -12,6 +13,7 @@ from test_detection_synthetic import ring_frame
 from speed_sign_detector.config import DetectorConfig
 from speed_sign_detector.detection.candidates import Candidate
 from speed_sign_detector.detection.detector import Detector
+from speed_sign_detector.detection.voting_gl import resolve_vote_method
 from speed_sign_detector.detection.voting_numpy import compute_edges
 
 CONFIGS = {
@@ -42,6 +44,7 @@ def synthetic_scene() -> np.ndarray:
 
 def assert_backends_agree(gray: np.ndarray, config: DetectorConfig) -> None:
     with Detector(config, backend='gl') as gl, Detector(config, backend='numpy') as ref:
+        assert gl.vote_method == config.vote_method
         gl_votes, ref_votes = gl.vote_images(gray), ref.vote_images(gray)
         assert len(gl_votes) == len(ref_votes) == len(ref.bands)
         for band, gl_image, ref_image in zip(ref.bands, gl_votes, ref_votes):
@@ -74,14 +77,44 @@ def assert_same_candidates(gl: tuple[Candidate, ...], ref: tuple[Candidate, ...]
         assert math.hypot(first_gl.x_px - first_ref.x_px, first_gl.y_px - first_ref.y_px) <= 1.0
 
 
+VOTE_METHODS = ('raster', 'scatter')
+
+
+def with_method(config: DetectorConfig, vote_method: str) -> DetectorConfig:
+    return dataclasses.replace(config, vote_method=vote_method)
+
+
+@pytest.mark.parametrize('vote_method', VOTE_METHODS)
 @pytest.mark.parametrize('name', sorted(CONFIGS))
-def test_backends_agree_on_synthetic_scene(name: str) -> None:
-    assert_backends_agree(synthetic_scene(), CONFIGS[name])
+def test_backends_agree_on_synthetic_scene(name: str, vote_method: str) -> None:
+    assert_backends_agree(synthetic_scene(), with_method(CONFIGS[name], vote_method))
 
 
-def test_backends_agree_on_real_scene(scene: np.ndarray) -> None:
-    assert_backends_agree(scene, CONFIGS['default'])
+@pytest.mark.parametrize('vote_method', VOTE_METHODS)
+def test_backends_agree_on_real_scene(scene: np.ndarray, vote_method: str) -> None:
+    assert_backends_agree(scene, with_method(CONFIGS['default'], vote_method))
 
 
-def test_backends_agree_at_640x480(scene: np.ndarray) -> None:
-    assert_backends_agree(np.ascontiguousarray(scene[:, 88:728]), CONFIGS['default'])
+@pytest.mark.parametrize('vote_method', VOTE_METHODS)
+def test_backends_agree_at_640x480(scene: np.ndarray, vote_method: str) -> None:
+    assert_backends_agree(np.ascontiguousarray(scene[:, 88:728]),
+                          with_method(CONFIGS['default'], vote_method))
+
+
+def test_scatter_votes_are_reproducible(scene: np.ndarray) -> None:
+    """Integer sums do not depend on the (atomic, unordered) edge list order."""
+    config = with_method(CONFIGS['default'], 'scatter')
+    with Detector(config, backend='gl') as gl:
+        first = gl.vote_images(scene)
+        second = gl.vote_images(scene[::-1, ::-1].copy())
+        third = gl.vote_images(scene)
+    for one, other in zip(first, third):
+        np.testing.assert_array_equal(one, other)
+    assert any(not np.array_equal(one, other) for one, other in zip(first, second))
+
+
+def test_auto_vote_method_follows_the_renderer() -> None:
+    assert resolve_vote_method('auto', 'llvmpipe (LLVM 15.0.6, 256 bits)') == 'scatter'
+    assert resolve_vote_method('auto', 'NVIDIA H100 80GB HBM3/PCIe/SSE2') == 'raster'
+    assert resolve_vote_method('raster', 'llvmpipe (LLVM 15.0.6, 256 bits)') == 'raster'
+    assert resolve_vote_method('scatter', 'NVIDIA H100 80GB HBM3/PCIe/SSE2') == 'scatter'

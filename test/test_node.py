@@ -244,6 +244,7 @@ def test_diagnostics_report_counts_latency_and_backend(ros: tuple) -> None:
                            and v['latency_p50_ms'] != 'nan')
     assert values['backend'] in ('gl', 'numpy')
     assert values['gl_renderer']
+    assert values['vote_method'] in ('raster', 'scatter', 'numpy')
     assert values['_hardware_id'].startswith(values['backend'])
     for key in ('processing_fps', 'latency_p50_ms', 'latency_p95_ms',
                 'processing_latency_p50_ms', 'processing_latency_p95_ms'):
@@ -381,6 +382,7 @@ def test_backend_switch_rebuilds_the_detector_on_the_worker(ros: tuple) -> None:
                       probe.image_pub)
         values = latest_status(probe, lambda v: v['backend'] == 'numpy')
         assert values['gl_renderer'] == 'numpy reference'
+        assert values['vote_method'] == 'numpy'
     finally:
         call_set_parameters(probe, parameter('backend', 'auto'))
     send_and_wait(probe, image_message(textured_background(9), Header(), image_class=Image),

@@ -50,6 +50,7 @@ class Detector:
     Attributes:
         backend_name: ``'gl'`` or ``'numpy'``.
         renderer: the GL_RENDERER string, or ``'numpy reference'``.
+        vote_method: how votes are added: ``'raster'`` or ``'scatter'`` (GL), ``'numpy'``.
         fallback_reason: why ``'auto'`` fell back to numpy, else None.
 
     Raises:
@@ -88,10 +89,13 @@ class Detector:
         if self._gl is not None:
             self.backend_name = 'gl'
             self.renderer = self._gl.renderer
+            self.vote_method = self._gl.vote_method
         else:
             self.backend_name = 'numpy'
             self.renderer = 'numpy reference'
-        LOGGER.info('detector backend: %s (%s)', self.backend_name, self.renderer)
+            self.vote_method = 'numpy'
+        LOGGER.info('detector backend: %s (%s), %s voting', self.backend_name, self.renderer,
+                    self.vote_method)
         self._closed = False
 
     def detect(self, gray: np.ndarray) -> tuple[Candidate, ...]:

@@ -5,20 +5,33 @@ The same maths as :mod:`speed_sign_detector.detection.voting_numpy`, kept on the
 1. the frame is uploaded once as an R8UI texture; one compute pass maps it through the
    contrast table (linear or log) into level 0 of a float pyramid and writes levels 1
    and 2 (2x2 box averages) in the same pass; further levels, if any, get one pass each;
-2. per pyramid level, two compute passes mark edge pixels (3x3 Sobel gradient,
-   threshold, non-maximum suppression into an R32F mask; then neighbour support) and
-   append them to an edge list (SSBO) with ``atomicAdd`` on the vertex count of that
-   level's indirect draw command, so the CPU never sees the edges. Both passes
-   recompute the Sobel gradient from the level instead of storing an RGBA32F gradient
-   image (on llvmpipe the image store costs more than the recomputation);
-3. one indirect draw per group of radius bands (two bands sharing edge and vote levels
-   share an RGBA32F target: RG for the first, BA for the second; a lone band has an
-   RG32F target): the vertex shader reads
-   edge ``gl_VertexID / 3`` and emits its vote triangle (apex at the edge pixel, far side
-   at the band group's largest radius, half-width ``r tan(pi/8)``); the fragment shader
-   drops votes nearer than the smallest radius (so each band gets the trapezoid of the
-   paper) and adds ``(profile / u, profile)`` into the band's channels with additive
-   blending; bands that vote toward both sides draw twice;
+2. per pyramid level, two compute passes find the edge pixels: the first takes the 3x3
+   Sobel gradient, applies the threshold and the non-maximum suppression, and writes
+   each edge pixel's unit gradient direction into an RG32F image ((0, 0) elsewhere); the
+   second applies the neighbour-support test on those directions and appends the edge
+   pixels to an edge list (SSBO) with ``atomicAdd`` on the vertex count of that level's
+   indirect draw command (and on the group count of its indirect dispatch), so the CPU
+   never sees the edges;
+3. the votes, one draw or dispatch per group of radius bands (two bands sharing edge
+   and vote levels share it; a vote goes to a band by its distance), in one of two ways
+   (``DetectorConfig.vote_method``):
+
+   - ``raster``, the paper's: an indirect draw whose vertex shader reads edge
+     ``gl_VertexID / 3`` and emits its vote triangle (apex at the edge pixel, far side at
+     the group's largest radius, half-width ``r tan(pi/8)``); the fragment shader drops
+     votes nearer than the smallest radius (so each band gets the trapezoid of the paper)
+     and adds ``(profile / u, profile)`` with additive blending into an RGBA32F target
+     (RG for the first band, BA for the second; RG32F for a lone band);
+   - ``scatter``: an indirect compute dispatch, one invocation per edge, walks the
+     pixels whose centres lie inside the edge's trapezoid (the numpy reference's scanline
+     rule) and adds the same two values, in fixed point (units of
+     ``1 / FIXED_POINT_ONE``), to two R32UI images per band with ``imageAtomicAdd``.
+     Integer sums do not depend on the order of the edge list, so the votes are
+     bit-reproducible. On a software renderer (Mesa llvmpipe) it is about twice as fast
+     as the raster path: llvmpipe sets up every triangle on one CPU thread (about 0.7 us
+     each), while compute work is spread over all cores;
+
+   bands that vote toward both sides draw (or dispatch) twice;
 4. a compute shader scores every vote pixel and keeps, per 8x8 full-resolution block,
    the best pixel over all bands (with a sub-pixel parabola fit); only that block list
    (``blocks x 32`` bytes) is read back for the top-N selection.
@@ -53,6 +66,12 @@ from speed_sign_detector.errors import DetectorError
 _GROUP = 8
 _VERTICES_PER_EDGE = 3
 _FUSED_LEVELS = 3  # pyramid levels the fused upload pass writes
+_SCATTER_GROUP = 64  # edges per work group of the scatter pass
+FIXED_POINT_ONE = 65536.0
+"""Scatter voting stores votes as integers in units of 1 / FIXED_POINT_ONE."""
+VOTE_METHODS = ('raster', 'scatter')
+SOFTWARE_RENDERERS = ('llvmpipe', 'softpipe', 'swrast', 'swiftshader', 'lavapipe', 'software')
+"""GL_RENDERER substrings of renderers that run on the CPU (vote_method 'auto' scatters)."""
 
 _PYRAMID_SRC = """
 #version 430
@@ -144,16 +163,16 @@ _RIDGE_SRC = """
 #version 430
 layout(local_size_x = 8, local_size_y = 8) in;
 SOBEL
-layout(r32f, binding = 2) writeonly uniform image2D ridge;
+// an edge pixel's unit gradient direction g / |g|; (0, 0) elsewhere
+layout(rg32f, binding = 2) writeonly uniform image2D ridge;
 uniform ivec2 size;
 uniform float threshold;
 uniform bool thin;
 bool inner(ivec2 p) { return p.x >= 1 && p.y >= 1 && p.x < size.x - 1 && p.y < size.y - 1; }
 // magnitude at p (0 on the frame border, where the gradient is not taken)
 float magnitude_at(ivec2 p) { return inner(p) ? sobel(p).z : 0.0; }
-bool is_ridge(ivec2 p) {
+bool is_ridge(ivec2 p, vec3 g) {
     if (!inner(p)) return false;
-    vec3 g = sobel(p);
     if (!(g.z >= threshold)) return false;
     if (!thin) return true;
     float ax = abs(g.x), ay = abs(g.y);
@@ -170,17 +189,18 @@ bool is_ridge(ivec2 p) {
 void main() {
     ivec2 p = ivec2(gl_GlobalInvocationID.xy);
     if (p.x >= size.x || p.y >= size.y) return;
-    imageStore(ridge, p, vec4(is_ridge(p) ? 1.0 : 0.0));
+    vec3 g = inner(p) ? sobel(p) : vec3(0.0);
+    imageStore(ridge, p, is_ridge(p, g) ? vec4(g.xy / g.z, 0.0, 0.0) : vec4(0.0));
 }
 """.replace('SOBEL', _SOBEL_GLSL)
 
 _EDGES_SRC = """
 #version 430
 layout(local_size_x = 8, local_size_y = 8) in;
-SOBEL
-layout(r32f, binding = 2) readonly uniform image2D ridge;
+layout(rg32f, binding = 2) readonly uniform image2D ridge;
 layout(std430, binding = 0) buffer Command { uint command[4]; };
 layout(std430, binding = 1) writeonly buffer Edges { vec4 edges[]; };
+layout(std430, binding = 3) buffer Dispatch { uint dispatch[3]; };
 uniform ivec2 size;
 uniform uint vertices_per_edge;
 uniform int min_support;
@@ -188,25 +208,25 @@ uniform float support_cosine;
 void main() {
     ivec2 p = ivec2(gl_GlobalInvocationID.xy);
     if (p.x < 1 || p.y < 1 || p.x >= size.x - 1 || p.y >= size.y - 1) return;
-    if (imageLoad(ridge, p).r == 0.0) return;
-    vec3 g = sobel(p);
-    vec2 direction = g.xy / g.z;
+    vec2 direction = imageLoad(ridge, p).xy;
+    if (direction == vec2(0.0)) return;
     if (min_support > 0) {
         int support = 0;
         for (int dy = -1; dy <= 1; ++dy) {
             for (int dx = -1; dx <= 1; ++dx) {
-                ivec2 q = p + ivec2(dx, dy);
-                if ((dx == 0 && dy == 0) || imageLoad(ridge, q).r == 0.0) continue;
-                vec3 h = sobel(q);
-                if (dot(direction, h.xy / h.z) >= support_cosine) support += 1;
+                vec2 other = imageLoad(ridge, p + ivec2(dx, dy)).xy;
+                if ((dx == 0 && dy == 0) || other == vec2(0.0)) continue;
+                if (dot(direction, other) >= support_cosine) support += 1;
             }
         }
         if (support < min_support) return;
     }
     uint index = atomicAdd(command[0], vertices_per_edge) / vertices_per_edge;
     edges[index] = vec4(vec2(p), direction);
+    // the scatter pass runs one invocation per edge in groups of SCATTER_GROUP
+    if (index % uint(SCATTER_GROUP) == 0u) atomicAdd(dispatch[0], 1u);
 }
-""".replace('SOBEL', _SOBEL_GLSL)
+"""
 
 _VOTE_VERTEX_SRC = """
 #version 430
@@ -252,10 +272,91 @@ void main() {
 }
 """
 
+_SCATTER_SRC = """
+#version 430
+layout(local_size_x = SCATTER_GROUP) in;
+layout(std430, binding = 0) readonly buffer Command { uint command[4]; };
+layout(std430, binding = 1) readonly buffer Edges { vec4 edges[]; };
+layout(r32ui, binding = 0) uniform uimage2D weights_first;
+layout(r32ui, binding = 1) uniform uimage2D counts_first;
+layout(r32ui, binding = 2) uniform uimage2D weights_second;
+layout(r32ui, binding = 3) uniform uimage2D counts_second;
+uniform ivec2 size;
+uniform float shrink;
+uniform float min_radius;
+uniform float max_radius;
+uniform float split_radius;
+uniform float vote_sign;
+uniform float spread;
+uniform bool tent;
+// One invocation per edge: the pixels whose centres lie inside its trapezoid, row by
+// row (the scanline rule of the numpy reference), each vote added as a fixed-point
+// integer (order-independent sums: the result does not depend on the edge order).
+void main() {
+    uint index = gl_GlobalInvocationID.x;
+    if (index >= command[0] / uint(VERTICES_PER_EDGE)) return;
+    vec4 edge = edges[index];
+    vec2 centre = (edge.xy + 0.5) * shrink - 0.5;
+    vec2 direction = vote_sign * edge.zw;
+    vec2 normal = vec2(-direction.y, direction.x);
+    float near = min_radius * shrink;
+    float far = max_radius * shrink;
+    vec2 corners[4] = vec2[4](centre + near * (direction + spread * normal),
+                              centre + far * (direction + spread * normal),
+                              centre + far * (direction - spread * normal),
+                              centre + near * (direction - spread * normal));
+    float low = min(min(corners[0].y, corners[1].y), min(corners[2].y, corners[3].y));
+    float high = max(max(corners[0].y, corners[1].y), max(corners[2].y, corners[3].y));
+    int first_row = max(int(ceil(low)), 0);
+    int last_row = min(int(floor(high)), size.y - 1);
+    for (int row = first_row; row <= last_row; ++row) {
+        float y = float(row);
+        float left = 3.0e38;
+        float right = -3.0e38;
+        for (int side = 0; side < 4; ++side) {
+            vec2 a = corners[side];
+            vec2 b = corners[(side + 1) & 3];
+            if ((y - a.y) * (y - b.y) <= 0.0 && a.y != b.y) {
+                float x = a.x + (y - a.y) * (b.x - a.x) / (b.y - a.y);
+                left = min(left, x);
+                right = max(right, x);
+            }
+        }
+        if (left > right) continue;
+        int first_col = max(int(ceil(left)), 0);
+        int last_col = min(int(floor(right)), size.x - 1);
+        for (int col = first_col; col <= last_col; ++col) {
+            vec2 offset = vec2(float(col), y) - centre;
+            float along = dot(offset, direction);
+            float profile = 1.0;
+            if (tent) {
+                profile = along > 0.0
+                    ? clamp(1.0 - abs(dot(offset, normal)) / (spread * along), 0.0, 1.0) : 0.0;
+            }
+            uint count = uint(profile * FIXED_POINT_ONE + 0.5);
+            if (count == 0u) continue;
+            float distance = max(along / shrink, 0.5 * min_radius);
+            uint weight = uint(profile / distance * FIXED_POINT_ONE + 0.5);
+            ivec2 q = ivec2(col, row);
+            if (distance < split_radius) {
+                imageAtomicAdd(weights_first, q, weight);
+                imageAtomicAdd(counts_first, q, count);
+            } else {
+                imageAtomicAdd(weights_second, q, weight);
+                imageAtomicAdd(counts_second, q, count);
+            }
+        }
+    }
+}
+"""
+
 _REDUCE_SRC = """
 #version 430
 layout(local_size_x = 8, local_size_y = 8) in;
-layout(binding = 0) uniform sampler2D votes;
+// a band's (sum w, n) votes: channel weight_channel of 'weights' and count_channel of
+// 'counts' (one RGBA32F/RG32F target for raster voting, two R32UI images for scatter)
+layout(binding = 0) uniform VOTE_SAMPLER weights;
+layout(binding = 1) uniform VOTE_SAMPLER counts;
 struct Best { vec4 score_x_y_radius; vec4 band_unused; };
 layout(std430, binding = 2) buffer Blocks { Best blocks[]; };
 uniform ivec2 blocks_size;
@@ -264,11 +365,16 @@ uniform int block_level_px;
 uniform int scale;
 uniform int target_scale;
 uniform int band;
-uniform int slot;
+uniform int weight_channel;
+uniform int count_channel;
+uniform float vote_unit;
 uniform float normaliser;
+vec2 votes_at(ivec2 q) {
+    return vec2(float(texelFetch(weights, q, 0)[weight_channel]),
+                float(texelFetch(counts, q, 0)[count_channel])) * vote_unit;
+}
 float score_at(ivec2 q) {
-    vec4 v = texelFetch(votes, q, 0);
-    return (slot == 0 ? v.r : v.b) * normaliser;
+    return votes_at(q).x * normaliser;
 }
 float score_clamped(ivec2 q) {
     return score_at(clamp(q, ivec2(0), level_size - 1));
@@ -298,8 +404,7 @@ void main() {
                       score_clamped(best_q + ivec2(1, 0)));
     float oy = offset(score_clamped(best_q - ivec2(0, 1)), best,
                       score_clamped(best_q + ivec2(0, 1)));
-    vec4 v = texelFetch(votes, best_q, 0);
-    vec2 band_votes = slot == 0 ? v.rg : v.ba;
+    vec2 band_votes = votes_at(best_q);
     float radius = band_votes.y / band_votes.x * float(scale);
     float half_step = 0.5 * float(target_scale - 1);
     blocks[index].score_x_y_radius = vec4(best, float(target_scale) * (float(best_q.x) + ox) + half_step,
@@ -320,20 +425,47 @@ class _LevelResources:
     ridge: object
     edges: object
     command: object
+    dispatch: object
 
 
 @dataclass
 class _DrawGroup:
-    """One or two adjacent bands with the same edge and vote levels: one draw.
+    """One or two adjacent bands with the same edge and vote levels: one draw/dispatch.
 
-    The RGBA32F target holds ``(sum w, n)`` of the first band in RG and of the second
-    in BA; the fragment shader routes a vote by its distance. A group of one band has
-    an RG32F target (half the blending work).
+    Raster voting: one float target; RGBA32F holds ``(sum w, n)`` of the first band in
+    RG and of the second in BA (the fragment shader routes a vote by its distance); a
+    group of one band has an RG32F target (half the blending work). Scatter voting: two
+    R32UI images per band, ``sum w`` then ``n``, in fixed point. ``framebuffer`` has
+    every texture attached (it clears them).
     """
 
     bands: tuple[RadiusBand, ...]
-    target: object
+    textures: list
     framebuffer: object
+    scatter: bool
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """``(width, height)`` of the vote images."""
+        return self.textures[0].size
+
+    def band_votes(self, slot: int) -> tuple[object, int, object, int]:
+        """``(weights texture, channel, counts texture, channel)`` of band ``slot``."""
+        if self.scatter:
+            return self.textures[2 * slot], 0, self.textures[2 * slot + 1], 0
+        return self.textures[0], CHANNELS * slot, self.textures[0], CHANNELS * slot + 1
+
+    def read_band(self, slot: int) -> np.ndarray:
+        """Band ``slot``'s vote image, (H, W, CHANNELS) float32."""
+        width, height = self.size
+        if self.scatter:
+            channels = [np.frombuffer(texture.read(), np.uint32).reshape(height, width)
+                        for texture in self.textures[2 * slot:2 * slot + 2]]
+            return (np.stack(channels, axis=-1) / FIXED_POINT_ONE).astype(np.float32)
+        target = self.textures[0]
+        pixels = np.frombuffer(target.read(), np.float32).reshape(height, width,
+                                                                  target.components)
+        return pixels[..., CHANNELS * slot:CHANNELS * (slot + 1)].copy()
 
 
 def _draw_groups(config: DetectorConfig,
@@ -354,6 +486,13 @@ def _draw_groups(config: DetectorConfig,
 class GLVoter:
     """The GL voting backend for one :class:`DetectorConfig` (one context, one thread).
 
+    Attributes:
+        renderer: the GL_RENDERER string.
+        vote_method: ``'raster'`` (triangles, additive blending: the paper's way) or
+            ``'scatter'`` (a compute pass adds each edge's trapezoid with integer
+            atomics); ``config.vote_method='auto'`` picks scatter on software renderers
+            (:data:`SOFTWARE_RENDERERS`), whose triangle setup runs on one CPU thread.
+
     Raises:
         DetectorError: when no OpenGL 4.3 context can be created or shaders do not build.
     """
@@ -370,18 +509,20 @@ class GLVoter:
                                 ) from err
         try:
             self.renderer = str(self._ctx.info['GL_RENDERER'])
+            self.vote_method = resolve_vote_method(config.vote_method, self.renderer)
+            scatter = self.vote_method == 'scatter'
             self._pyramid = self._ctx.compute_shader(_PYRAMID_SRC)
             self._downsample = self._ctx.compute_shader(_DOWNSAMPLE_SRC)
             self._ridge = self._ctx.compute_shader(_RIDGE_SRC)
-            self._extract = self._ctx.compute_shader(_EDGES_SRC)
-            self._reduce = self._ctx.compute_shader(_REDUCE_SRC)
-            vertices_per_edge = _VERTICES_PER_EDGE
-            self._vote = self._ctx.program(
-                vertex_shader=_VOTE_VERTEX_SRC.replace(
-                    '#version 430',
-                    f'#version 430\n#define VERTICES_PER_EDGE {vertices_per_edge}'),
+            self._extract = self._ctx.compute_shader(_with_constants(_EDGES_SRC))
+            self._reduce = self._ctx.compute_shader(_REDUCE_SRC.replace(
+                'VOTE_SAMPLER', 'usampler2D' if scatter else 'sampler2D'))
+            self._scatter = (self._ctx.compute_shader(_with_constants(_SCATTER_SRC))
+                             if scatter else None)
+            self._vote = None if scatter else self._ctx.program(
+                vertex_shader=_with_constants(_VOTE_VERTEX_SRC),
                 fragment_shader=_VOTE_FRAGMENT_SRC)
-            self._vote_array = self._ctx.vertex_array(self._vote, [])
+            self._vote_array = None if scatter else self._ctx.vertex_array(self._vote, [])
         except Exception as err:
             self._ctx.release()
             raise DetectorError(f'GL voting shaders failed to build: {err}') from err
@@ -447,11 +588,7 @@ class GLVoter:
         with self._ctx:
             self._run_votes(gray)
             for group in self._groups:
-                width, height = group.target.size
-                pixels = np.frombuffer(group.target.read(), np.float32).reshape(
-                    height, width, group.target.components)
-                for slot in range(len(group.bands)):
-                    images.append(pixels[..., CHANNELS * slot:CHANNELS * (slot + 1)].copy())
+                images.extend(group.read_band(slot) for slot in range(len(group.bands)))
         return images
 
     def edge_counts(self) -> list[int]:
@@ -475,16 +612,20 @@ class GLVoter:
             self._levels.append(_LevelResources(
                 level_width, level_height,
                 image=ctx.texture((level_width, level_height), 1, dtype='f4'),
-                ridge=ctx.texture((level_width, level_height), 1, dtype='f4'),
+                ridge=ctx.texture((level_width, level_height), 2, dtype='f4'),
                 edges=ctx.buffer(reserve=16 * level_width * level_height),
-                command=ctx.buffer(reserve=16)))
+                command=ctx.buffer(reserve=16),
+                dispatch=ctx.buffer(reserve=12)))
             level_width, level_height = level_width // 2, level_height // 2
         self._groups = []
+        scatter = self.vote_method == 'scatter'
         for bands in _draw_groups(self._config, self._bands):
             size = level_size(width, height, bands[0].target_level)
-            target = ctx.texture(size, CHANNELS * len(bands), dtype='f4')
-            self._groups.append(_DrawGroup(bands, target,
-                                           ctx.framebuffer(color_attachments=[target])))
+            textures = ([ctx.texture(size, 1, dtype='u4') for _ in range(CHANNELS * len(bands))]
+                        if scatter else [ctx.texture(size, CHANNELS * len(bands), dtype='f4')])
+            self._groups.append(_DrawGroup(bands, textures,
+                                           ctx.framebuffer(color_attachments=textures),
+                                           scatter))
         block = self._config.block_size_px
         self._blocks_shape = (-(-height // block), -(-width // block))
         self._blocks = ctx.buffer(reserve=32 * self._blocks_shape[0] * self._blocks_shape[1])
@@ -493,9 +634,9 @@ class GLVoter:
     def _release_size_resources(self) -> None:
         objects = [self._frame, self._blocks]
         for level in self._levels:
-            objects += [level.image, level.ridge, level.edges, level.command]
+            objects += [level.image, level.ridge, level.edges, level.command, level.dispatch]
         for group in self._groups:
-            objects += [group.framebuffer, group.target]
+            objects += [group.framebuffer, *group.textures]
         for item in objects:
             if item is not None:
                 item.release()
@@ -542,7 +683,8 @@ class GLVoter:
         self._ridge['thin'] = bool(self._config.thin_edges)
         for level in self._levels:
             level.image.bind_to_image(0, read=True, write=False)
-            level.command.write(np.array([0, 1, 0, 0], np.uint32).tobytes())
+            level.command.write(_EMPTY_DRAW)
+            level.dispatch.write(_EMPTY_DISPATCH)
             level.ridge.bind_to_image(2, read=False, write=True)
             self._ridge['size'] = (level.width_px, level.height_px)
             self._ridge.run(_groups(level.width_px), _groups(level.height_px))
@@ -550,12 +692,22 @@ class GLVoter:
             level.ridge.bind_to_image(2, read=True, write=False)
             level.command.bind_to_storage_buffer(0)
             level.edges.bind_to_storage_buffer(1)
+            level.dispatch.bind_to_storage_buffer(3)
             self._extract['size'] = (level.width_px, level.height_px)
             self._extract.run(_groups(level.width_px), _groups(level.height_px))
             self._stage('edges')
         ctx.memory_barrier()
+        if self._scatter is not None:
+            self._scatter_votes()
+        else:
+            self._draw_votes()
+        self._stage('vote')
+
+    def _draw_votes(self) -> None:
+        """Raster voting: one indirect triangle draw per group and vote direction."""
         import moderngl
 
+        ctx = self._ctx
         ctx.enable_only(moderngl.BLEND)
         ctx.blend_func = moderngl.ONE, moderngl.ONE
         ctx.blend_equation = moderngl.FUNC_ADD
@@ -566,20 +718,42 @@ class GLVoter:
             level = self._levels[first.level]
             group.framebuffer.use()
             group.framebuffer.clear(0.0, 0.0, 0.0, 0.0)
-            self._vote['size'] = tuple(float(extent) for extent in group.target.size)
+            self._vote['size'] = tuple(float(extent) for extent in group.size)
             self._vote['shrink'] = first.shrink
             self._vote['min_radius'] = first.level_radii[0]
             self._vote['max_radius'] = last.level_radii[1]
-            self._vote['split_radius'] = (first.level_radii[1] if len(group.bands) == 2
-                                          else 3.0e38)
+            self._vote['split_radius'] = _split_radius(group.bands)
             level.edges.bind_to_storage_buffer(1)
             for sign in vote_signs(self._config, first):
                 self._vote['vote_sign'] = sign
                 self._vote_array.render_indirect(level.command, mode=moderngl.TRIANGLES,
                                                  count=1)
         ctx.disable(moderngl.BLEND)
-        ctx.memory_barrier()
-        self._stage('vote')
+
+    def _scatter_votes(self) -> None:
+        """Scatter voting: one indirect compute dispatch per group and vote direction."""
+        scatter = self._scatter
+        scatter['spread'] = SPREAD
+        scatter['tent'] = self._config.vote_profile == 'tent'
+        for group in self._groups:
+            first, last = group.bands[0], group.bands[-1]
+            level = self._levels[first.level]
+            group.framebuffer.clear(0.0, 0.0, 0.0, 0.0)
+            # a lone band routes nothing to the second pair; bind its images there too
+            for unit in range(2 * CHANNELS):
+                texture = group.textures[unit % len(group.textures)]
+                texture.bind_to_image(unit, read=True, write=True)
+            scatter['size'] = group.size
+            scatter['shrink'] = first.shrink
+            scatter['min_radius'] = first.level_radii[0]
+            scatter['max_radius'] = last.level_radii[1]
+            scatter['split_radius'] = _split_radius(group.bands)
+            level.command.bind_to_storage_buffer(0)
+            level.edges.bind_to_storage_buffer(1)
+            for sign in vote_signs(self._config, first):
+                scatter['vote_sign'] = sign
+                scatter.run_indirect(level.dispatch)
+                self._ctx.memory_barrier()
 
     def _reduce_blocks(self) -> None:
         rows, cols = self._blocks_shape
@@ -589,11 +763,15 @@ class GLVoter:
         self._blocks.bind_to_storage_buffer(2)
         block = self._config.block_size_px
         self._reduce['blocks_size'] = (cols, rows)
+        self._reduce['vote_unit'] = 1.0 / FIXED_POINT_ONE if self._scatter else 1.0
         for group in self._groups:
-            group.target.use(0)
             for slot, band in enumerate(group.bands):
-                self._reduce['slot'] = slot
-                self._reduce['level_size'] = group.target.size
+                weights, weight_channel, counts, count_channel = group.band_votes(slot)
+                weights.use(0)
+                counts.use(1)
+                self._reduce['weight_channel'] = weight_channel
+                self._reduce['count_channel'] = count_channel
+                self._reduce['level_size'] = group.size
                 self._reduce['block_level_px'] = max(1, block // band.target_scale)
                 self._reduce['scale'] = band.scale
                 self._reduce['target_scale'] = band.target_scale
@@ -603,6 +781,31 @@ class GLVoter:
                 self._reduce.run(_groups(cols), _groups(rows))
                 self._ctx.memory_barrier()
         self._stage('reduce')
+
+
+_EMPTY_DRAW = np.array([0, 1, 0, 0], np.uint32).tobytes()
+_EMPTY_DISPATCH = np.array([0, 1, 1], np.uint32).tobytes()
+
+
+def resolve_vote_method(vote_method: str, renderer: str) -> str:
+    """``'raster'`` or ``'scatter'`` for a config's ``vote_method`` on a GL renderer."""
+    if vote_method in VOTE_METHODS:
+        return vote_method
+    software = any(name in renderer.lower() for name in SOFTWARE_RENDERERS)
+    return 'scatter' if software else 'raster'
+
+
+def _split_radius(bands: tuple[RadiusBand, ...]) -> float:
+    """Level-pixel distance from which a vote goes to the group's second band."""
+    return bands[0].level_radii[1] if len(bands) == 2 else 3.0e38
+
+
+def _with_constants(source: str) -> str:
+    """Shader source with the module's constants defined after its #version line."""
+    return source.replace('#version 430', '#version 430\n'
+                          f'#define VERTICES_PER_EDGE {_VERTICES_PER_EDGE}\n'
+                          f'#define SCATTER_GROUP {_SCATTER_GROUP}\n'
+                          f'#define FIXED_POINT_ONE {FIXED_POINT_ONE:.1f}', 1)
 
 
 def _groups(extent: int) -> int:

@@ -265,6 +265,7 @@ class SpeedSignDetectorNode(Node):
         self._stopping = False
         self._backend = 'starting'
         self._renderer = ''
+        self._vote_method = ''
         self._fallback_reason: str | None = None
         self._last_tick = (time.monotonic(), 0)
         self._published_limit_kmh: int | None = None
@@ -305,7 +306,7 @@ class SpeedSignDetectorNode(Node):
         self.get_logger().info(
             f'listening on {self._image_sub.topic_name} and {self._compressed_sub.topic_name} '
             f'({_describe_qos(self._image_sub.qos_profile)}); voting backend {self._backend} '
-            f'({self._renderer})'
+            f'({self._renderer}, {self._vote_method} voting)'
             + (f', GL not used because {self._fallback_reason}' if self._fallback_reason
                else ''))
 
@@ -420,6 +421,7 @@ class SpeedSignDetectorNode(Node):
                 'active_limit_kmh': str(active_limit),
                 'backend': self._backend,
                 'gl_renderer': self._renderer,
+                'vote_method': self._vote_method,
                 'gl_fallback_reason': self._fallback_reason or '',
                 'last_error': last_error,
             })
@@ -456,6 +458,7 @@ class SpeedSignDetectorNode(Node):
         try:
             pipeline = Pipeline(self._pipeline_config)
             self._backend, self._renderer = pipeline.backend_name, pipeline.renderer
+            self._vote_method = pipeline.vote_method
             self._fallback_reason = pipeline.fallback_reason
         except Exception as err:  # noqa: BLE001 - reported to the constructor
             self._worker_error = err
@@ -486,8 +489,10 @@ class SpeedSignDetectorNode(Node):
             self._record_error(f'cannot apply the new parameters: {err}')
             return
         self._backend, self._renderer = pipeline.backend_name, pipeline.renderer
+        self._vote_method = pipeline.vote_method
         self._fallback_reason = pipeline.fallback_reason
-        self.get_logger().info(f'parameters applied (backend {self._backend})')
+        self.get_logger().info(f'parameters applied (backend {self._backend}, '
+                               f'{self._vote_method} voting)')
 
     def _process(self, pipeline: Pipeline, frame: ReceivedFrame) -> None:
         """Convert, run and publish one frame (a bad one is counted and logged)."""

@@ -12,7 +12,7 @@ sign of that value (background, another sign such as end of 80, or a misread val
 Output (``--json``: one JSON object as the last stdout line): ``frames``, ``signs``,
 ``found``, ``candidate_recall``, ``ms_per_frame`` (everything per frame: reading,
 conversion, detection, scoring), ``detector_ms_per_frame`` (``Detector.detect`` alone),
-``backend``, ``renderer``, ``max_candidates``, ``recall_by_size`` (per sign radius range),
+``backend``, ``renderer``, ``vote_method``, ``max_candidates``, ``recall_by_size`` (per sign radius range),
 ``radius_ratio_median`` (candidate radius / box radius over the found signs: the
 detector reports the radius of the edge that voted, mostly the inner edge of the ring);
 with classification: ``recognized``, ``recognition_recall``, ``false_limits``,
@@ -218,6 +218,7 @@ def run(args: argparse.Namespace) -> int:
                 LOGGER.info('%d/%d frames, recall so far %.3f', index + 1, len(files),
                             found / max(signs, 1))
         backend, renderer = detector.backend_name, detector.renderer
+        vote_method = detector.vote_method
     elapsed_s = time.perf_counter() - start
     result = {
         'frames': len(files),
@@ -228,6 +229,7 @@ def run(args: argparse.Namespace) -> int:
         'detector_ms_per_frame': 1e3 * detector_s / len(files),
         'backend': backend,
         'renderer': renderer,
+        'vote_method': vote_method,
         'max_candidates': config.max_candidates,
         'radius_ratio_median': (statistics.median(radius_ratios) if radius_ratios else None),
         'recall_by_size': {f'{low:g}-{high:g}px': {
@@ -251,7 +253,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _print_table(result: dict) -> None:
     print(f"scenes: {result['frames']} frames, {result['signs']} speed-limit signs")
-    print(f"backend: {result['backend']} ({result['renderer']})")
+    print(f"backend: {result['backend']} ({result['renderer']}), "
+          f"{result['vote_method']} voting")
     print(f"{'metric':<28}{'value':>12}")
     print(f"{'candidate recall (top ' + str(result['max_candidates']) + ')':<28}"
           f"{result['candidate_recall']:>12.3f}")
