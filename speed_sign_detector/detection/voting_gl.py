@@ -277,10 +277,8 @@ _SCATTER_SRC = """
 layout(local_size_x = SCATTER_GROUP) in;
 layout(std430, binding = 0) readonly buffer Command { uint command[4]; };
 layout(std430, binding = 1) readonly buffer Edges { vec4 edges[]; };
-layout(r32ui, binding = 0) uniform uimage2D weights_first;
-layout(r32ui, binding = 1) uniform uimage2D counts_first;
-layout(r32ui, binding = 2) uniform uimage2D weights_second;
-layout(r32ui, binding = 3) uniform uimage2D counts_second;
+// the group's votes: band slot s, sum w at (x + s W, y), n at (x + s W, y + H)
+layout(r32ui, binding = 0) uniform uimage2D votes;
 uniform ivec2 size;
 uniform float shrink;
 uniform float min_radius;
@@ -337,14 +335,9 @@ void main() {
             if (count == 0u) continue;
             float distance = max(along / shrink, 0.5 * min_radius);
             uint weight = uint(profile / distance * FIXED_POINT_ONE + 0.5);
-            ivec2 q = ivec2(col, row);
-            if (distance < split_radius) {
-                imageAtomicAdd(weights_first, q, weight);
-                imageAtomicAdd(counts_first, q, count);
-            } else {
-                imageAtomicAdd(weights_second, q, weight);
-                imageAtomicAdd(counts_second, q, count);
-            }
+            ivec2 q = ivec2(distance < split_radius ? col : col + size.x, row);
+            imageAtomicAdd(votes, q, weight);
+            imageAtomicAdd(votes, ivec2(q.x, row + size.y), count);
         }
     }
 }
@@ -353,10 +346,10 @@ void main() {
 _REDUCE_SRC = """
 #version 430
 layout(local_size_x = 8, local_size_y = 8) in;
-// a band's (sum w, n) votes: channel weight_channel of 'weights' and count_channel of
-// 'counts' (one RGBA32F/RG32F target for raster voting, two R32UI images for scatter)
-layout(binding = 0) uniform VOTE_SAMPLER weights;
-layout(binding = 1) uniform VOTE_SAMPLER counts;
+// a band's (sum w, n) votes: channel weight_channel at q + weight_offset and
+// count_channel at q + count_offset (raster: RG or BA of an RGBA32F/RG32F target, no
+// offsets; scatter: the band's two quadrants of the group's R32UI image)
+layout(binding = 0) uniform VOTE_SAMPLER votes;
 struct Best { vec4 score_x_y_radius; vec4 band_unused; };
 layout(std430, binding = 2) buffer Blocks { Best blocks[]; };
 uniform ivec2 blocks_size;
@@ -367,11 +360,13 @@ uniform int target_scale;
 uniform int band;
 uniform int weight_channel;
 uniform int count_channel;
+uniform ivec2 weight_offset;
+uniform ivec2 count_offset;
 uniform float vote_unit;
 uniform float normaliser;
 vec2 votes_at(ivec2 q) {
-    return vec2(float(texelFetch(weights, q, 0)[weight_channel]),
-                float(texelFetch(counts, q, 0)[count_channel])) * vote_unit;
+    return vec2(float(texelFetch(votes, q + weight_offset, 0)[weight_channel]),
+                float(texelFetch(votes, q + count_offset, 0)[count_channel])) * vote_unit;
 }
 float score_at(ivec2 q) {
     return votes_at(q).x * normaliser;
@@ -432,39 +427,39 @@ class _LevelResources:
 class _DrawGroup:
     """One or two adjacent bands with the same edge and vote levels: one draw/dispatch.
 
-    Raster voting: one float target; RGBA32F holds ``(sum w, n)`` of the first band in
-    RG and of the second in BA (the fragment shader routes a vote by its distance); a
-    group of one band has an RG32F target (half the blending work). Scatter voting: two
-    R32UI images per band, ``sum w`` then ``n``, in fixed point. ``framebuffer`` has
-    every texture attached (it clears them).
+    Raster voting: an RGBA32F target holds ``(sum w, n)`` of the first band in RG and of
+    the second in BA (the fragment shader routes a vote by its distance); a group of one
+    band has an RG32F target (half the blending work). Scatter voting: one R32UI image,
+    ``bands`` vote images wide and two high, fixed point: band ``s`` keeps ``sum w`` at
+    ``(x + s W, y)`` and ``n`` at ``(x + s W, y + H)``. ``size`` is one band's
+    ``(W, H)``; ``framebuffer`` has the texture attached (it clears it).
     """
 
     bands: tuple[RadiusBand, ...]
-    textures: list
+    size: tuple[int, int]
+    texture: object
     framebuffer: object
     scatter: bool
 
-    @property
-    def size(self) -> tuple[int, int]:
-        """``(width, height)`` of the vote images."""
-        return self.textures[0].size
-
-    def band_votes(self, slot: int) -> tuple[object, int, object, int]:
-        """``(weights texture, channel, counts texture, channel)`` of band ``slot``."""
+    def band_votes(self, slot: int) -> tuple[int, int, tuple[int, int], tuple[int, int]]:
+        """``(weight channel, count channel, weight offset, count offset)`` of band ``slot``
+        in :attr:`texture` (offsets in texels)."""
         if self.scatter:
-            return self.textures[2 * slot], 0, self.textures[2 * slot + 1], 0
-        return self.textures[0], CHANNELS * slot, self.textures[0], CHANNELS * slot + 1
+            width, height = self.size
+            return 0, 0, (slot * width, 0), (slot * width, height)
+        return CHANNELS * slot, CHANNELS * slot + 1, (0, 0), (0, 0)
 
     def read_band(self, slot: int) -> np.ndarray:
         """Band ``slot``'s vote image, (H, W, CHANNELS) float32."""
         width, height = self.size
         if self.scatter:
-            channels = [np.frombuffer(texture.read(), np.uint32).reshape(height, width)
-                        for texture in self.textures[2 * slot:2 * slot + 2]]
-            return (np.stack(channels, axis=-1) / FIXED_POINT_ONE).astype(np.float32)
-        target = self.textures[0]
-        pixels = np.frombuffer(target.read(), np.float32).reshape(height, width,
-                                                                  target.components)
+            pixels = np.frombuffer(self.texture.read(), np.uint32).reshape(
+                2 * height, len(self.bands) * width)
+            band = pixels[:, slot * width:(slot + 1) * width]
+            return (np.stack([band[:height], band[height:]], axis=-1)
+                    / FIXED_POINT_ONE).astype(np.float32)
+        pixels = np.frombuffer(self.texture.read(), np.float32).reshape(
+            height, width, self.texture.components)
         return pixels[..., CHANNELS * slot:CHANNELS * (slot + 1)].copy()
 
 
@@ -535,6 +530,7 @@ class GLVoter:
         self._groups: list[_DrawGroup] = []
         self._blocks = None
         self._blocks_shape = (0, 0)
+        self._blocks_initial = b''
         self._released = False
         self.stage_ms: dict[str, float] | None = None
         self._stage_start = 0.0
@@ -621,14 +617,17 @@ class GLVoter:
         scatter = self.vote_method == 'scatter'
         for bands in _draw_groups(self._config, self._bands):
             size = level_size(width, height, bands[0].target_level)
-            textures = ([ctx.texture(size, 1, dtype='u4') for _ in range(CHANNELS * len(bands))]
-                        if scatter else [ctx.texture(size, CHANNELS * len(bands), dtype='f4')])
-            self._groups.append(_DrawGroup(bands, textures,
-                                           ctx.framebuffer(color_attachments=textures),
+            texture = (ctx.texture((len(bands) * size[0], CHANNELS * size[1]), 1, dtype='u4')
+                       if scatter else ctx.texture(size, CHANNELS * len(bands), dtype='f4'))
+            self._groups.append(_DrawGroup(bands, size, texture,
+                                           ctx.framebuffer(color_attachments=[texture]),
                                            scatter))
         block = self._config.block_size_px
         self._blocks_shape = (-(-height // block), -(-width // block))
         self._blocks = ctx.buffer(reserve=32 * self._blocks_shape[0] * self._blocks_shape[1])
+        initial = np.zeros((self._blocks_shape[0] * self._blocks_shape[1], 8), np.float32)
+        initial[:, 0] = -1.0  # no score yet
+        self._blocks_initial = initial.tobytes()
         self._size = (width, height)
 
     def _release_size_resources(self) -> None:
@@ -636,7 +635,7 @@ class GLVoter:
         for level in self._levels:
             objects += [level.image, level.ridge, level.edges, level.command, level.dispatch]
         for group in self._groups:
-            objects += [group.framebuffer, *group.textures]
+            objects += [group.framebuffer, group.texture]
         for item in objects:
             if item is not None:
                 item.release()
@@ -739,10 +738,7 @@ class GLVoter:
             first, last = group.bands[0], group.bands[-1]
             level = self._levels[first.level]
             group.framebuffer.clear(0.0, 0.0, 0.0, 0.0)
-            # a lone band routes nothing to the second pair; bind its images there too
-            for unit in range(2 * CHANNELS):
-                texture = group.textures[unit % len(group.textures)]
-                texture.bind_to_image(unit, read=True, write=True)
+            group.texture.bind_to_image(0, read=True, write=True)
             scatter['size'] = group.size
             scatter['shrink'] = first.shrink
             scatter['min_radius'] = first.level_radii[0]
@@ -757,20 +753,20 @@ class GLVoter:
 
     def _reduce_blocks(self) -> None:
         rows, cols = self._blocks_shape
-        initial = np.zeros((rows * cols, 8), np.float32)
-        initial[:, 0] = -1.0
-        self._blocks.write(initial.tobytes())
+        self._blocks.write(self._blocks_initial)
         self._blocks.bind_to_storage_buffer(2)
         block = self._config.block_size_px
         self._reduce['blocks_size'] = (cols, rows)
         self._reduce['vote_unit'] = 1.0 / FIXED_POINT_ONE if self._scatter else 1.0
         for group in self._groups:
+            group.texture.use(0)
             for slot, band in enumerate(group.bands):
-                weights, weight_channel, counts, count_channel = group.band_votes(slot)
-                weights.use(0)
-                counts.use(1)
+                weight_channel, count_channel, weight_offset, count_offset = \
+                    group.band_votes(slot)
                 self._reduce['weight_channel'] = weight_channel
                 self._reduce['count_channel'] = count_channel
+                self._reduce['weight_offset'] = weight_offset
+                self._reduce['count_offset'] = count_offset
                 self._reduce['level_size'] = group.size
                 self._reduce['block_level_px'] = max(1, block // band.target_scale)
                 self._reduce['scale'] = band.scale
