@@ -13,6 +13,7 @@ Figures per rate:
     node_received / node_frames_dropped / node_lost_in_transport: the node's own counts
         (the middleware reports some, not all, samples lost on the way).
     pipeline_total_p50_ms: the pipeline's own processing time per frame (median).
+    pipeline_stage_p50_ms: the same per stage (detect, classify, track).
     rss_mb: resident memory of the node process, peak over the run (from /proc).
 
 Usage:
@@ -38,7 +39,7 @@ from pathlib import Path
 import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.executors import MultiThreadedExecutor
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import Image, PointCloud2
@@ -71,6 +72,7 @@ class RateResult:
     node_received: int
     node_lost_in_transport: int
     pipeline_total_p50_ms: float
+    pipeline_stage_p50_ms: dict[str, float]
     rss_mb: float
 
 
@@ -175,6 +177,9 @@ def run_rate(client: BenchClient, pid: int, rate_hz: float, seconds: float) -> R
         node_lost_in_transport=int(client.diagnostics.get('frames_lost_in_transport', 0))
         - lost_before,
         pipeline_total_p50_ms=float(client.diagnostics.get('pipeline_total_p50_ms', 'nan')),
+        pipeline_stage_p50_ms={key[len('pipeline_'):-len('_p50_ms')]: float(value)
+                               for key, value in client.diagnostics.items()
+                               if key.startswith('pipeline_') and key.endswith('_p50_ms')},
         rss_mb=rss)
 
 
@@ -215,7 +220,7 @@ def main(argv: list[str] | None = None) -> int:
     os.environ['ROS_DOMAIN_ID'] = str(args.domain_id)
     rclpy.init(args=[])
     client = BenchClient(drive_frames(args.width, args.height, args.frames))
-    executor = MultiThreadedExecutor(num_threads=2)
+    executor = SingleThreadedExecutor()
     executor.add_node(client)
     spinner = threading.Thread(target=executor.spin, daemon=True)
     spinner.start()
@@ -241,7 +246,10 @@ def main(argv: list[str] | None = None) -> int:
                   f'{result.dropped}/{result.published} unanswered (node received '
                   f'{result.node_received}, dropped {result.node_frames_dropped}, saw '
                   f'{result.node_lost_in_transport} lost in transport), '
-                  f'pipeline p50 {result.pipeline_total_p50_ms:.0f} ms, '
+                  f'pipeline p50 {result.pipeline_total_p50_ms:.0f} ms ('
+                  + ', '.join(f'{stage} {value:.0f}' for stage, value
+                              in result.pipeline_stage_p50_ms.items() if stage != 'total')
+                  + '), '
                   f'RSS {result.rss_mb:.0f} MiB', file=sys.stderr)
     finally:
         node_process.send_signal(signal.SIGINT)

@@ -189,7 +189,9 @@ def format_table(results: Mapping[str, Any]) -> str:
                            for key, value in pipeline['stage_p50_ms'].items())
         lines.append(f"Pipeline 640x480 ({pipeline['backend']}, {pipeline['renderer']}), "
                      f"{pipeline['frames']} synthetic-drive frames: "
-                     f"{_number(pipeline['fps'])} fps, latency p50 "
+                     f"{_number(pipeline['fps'])} fps serial, "
+                     f"{_number(pipeline.get('overlapped_fps'))} fps with detection "
+                     f"overlapping recognition (the node's default); latency p50 "
                      f"{_number(pipeline['latency_p50_ms'])} ms, p95 "
                      f"{_number(pipeline['latency_p95_ms'])} ms; stage p50 ms: {stages}")
     node = results.get('node')

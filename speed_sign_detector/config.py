@@ -290,6 +290,10 @@ class NodeOptions:
     error_log_period_s: float = setting(5.0, 'Bad-input errors are logged at most once per '
                                         'this many seconds (the rest are counted).',
                                         low=0.0, high=3600.0)
+    overlap_stages: bool = setting(True, 'Detect frame N+1 while frame N is recognized, on '
+                                   'a second thread: on a multi-core machine frames go '
+                                   'through at the pace of the slower stage instead of the '
+                                   'sum of both, each a little later.')
 
     def __post_init__(self) -> None:
         validate(self)

@@ -3,15 +3,18 @@
 The node, the bag tools, the evaluation and the benchmarks all run frames through
 :class:`Pipeline`: detection (radial-symmetry voting), recognition (FFT correlation
 with MACE filter banks) and temporal integration (tracking table, active limit).
-No ROS imports here.
+:class:`OverlappedPipeline` runs the same two halves on two threads, so that frame
+N+1 is detected while frame N is recognized (the node's way). No ROS imports here.
 """
 from __future__ import annotations
 
 import logging
+import threading
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from types import TracebackType
+from typing import Any, Self
 
 import numpy as np
 
@@ -60,11 +63,29 @@ class FrameResult:
     tracks_reset: bool = False
 
 
+@dataclass(frozen=True)
+class DetectedFrame:
+    """A frame after detection, waiting for recognition and tracking.
+
+    Attributes:
+        gray: the (H, W) uint8 frame.
+        stamp_s: message time of the frame, seconds.
+        candidates: the detector's candidates, best first.
+        detect_ms: time the detection took, milliseconds.
+    """
+
+    gray: np.ndarray
+    stamp_s: float
+    candidates: tuple[Candidate, ...]
+    detect_ms: float
+
+
 class Pipeline:
     """Detector, classifier and tracker behind one ``process`` call.
 
-    The detector may hold an OpenGL context: create, use and close a Pipeline on one
-    thread.
+    The detector may hold an OpenGL context: create, close and :meth:`detect` on one
+    thread. :meth:`recognize` may run on another thread (one at a time, frames in
+    order), which is what :class:`OverlappedPipeline` does.
 
     Example:
         >>> import numpy as np
@@ -116,32 +137,50 @@ class Pipeline:
         Raises:
             ValueError: for an unusable frame (empty, wrong dtype or shape, too small).
         """
+        return self.recognize(self.detect(gray, stamp_s))
+
+    def detect(self, gray: np.ndarray, stamp_s: float) -> DetectedFrame:
+        """The first half of :meth:`process`: the candidates of one frame.
+
+        Runs on the thread that created the pipeline (the detector's GL context).
+
+        Raises:
+            ValueError: for an unusable frame (empty, wrong dtype or shape, too small).
+        """
         detector = self._live_detector()
         started = time.perf_counter()
         candidates = detector.detect(gray)
-        detected = time.perf_counter()
+        return DetectedFrame(gray, stamp_s, candidates, (time.perf_counter() - started) * 1e3)
+
+    def recognize(self, frame: DetectedFrame) -> FrameResult:
+        """The second half of :meth:`process`: classification and tracking.
+
+        Frames must come in the order they were detected (the tracker integrates them).
+        """
+        started = time.perf_counter()
+        candidates = frame.candidates
         if self._classifier is not None and candidates:
             classifications: tuple[Classification | None, ...] = self._classifier.classify(
-                gray, candidates)
+                frame.gray, candidates)
         else:
             classifications = (None,) * len(candidates)
         classified = time.perf_counter()
         pairs = list(zip(candidates, classifications))
-        update = self._tracker.update(stamp_s, pairs)
+        update = self._tracker.update(frame.stamp_s, pairs)
         tracked = time.perf_counter()
         return FrameResult(
-            stamp_s=stamp_s,
-            width_px=int(gray.shape[1]),
-            height_px=int(gray.shape[0]),
+            stamp_s=frame.stamp_s,
+            width_px=int(frame.gray.shape[1]),
+            height_px=int(frame.gray.shape[0]),
             detections=tuple(Detection(candidate, classification)
                              for candidate, classification in pairs),
             tracks=update.tracks,
             active_limit_kmh=update.active_limit_kmh,
             recognized_limit_kmh=update.recognized_limit_kmh,
-            timings_ms={'detect': (detected - started) * 1e3,
-                        'classify': (classified - detected) * 1e3,
+            timings_ms={'detect': frame.detect_ms,
+                        'classify': (classified - started) * 1e3,
                         'track': (tracked - classified) * 1e3,
-                        'total': (tracked - started) * 1e3},
+                        'total': frame.detect_ms + (tracked - started) * 1e3},
             tracks_reset=update.tracks_reset)
 
     def reconfigure(self, config: PipelineConfig) -> None:
@@ -181,3 +220,129 @@ class Pipeline:
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
                  traceback: TracebackType | None) -> None:
         self.close()
+
+
+ResultCallback = Callable[[FrameResult, Any], None]
+"""``on_result(result, context)``: a frame's result and the context it was submitted with."""
+ErrorCallback = Callable[[Exception, Any], None]
+"""``on_error(error, context)``: recognition of a frame raised ``error``."""
+
+
+class OverlappedPipeline:
+    """Detection of frame N+1 overlapping the recognition of frame N, on two threads.
+
+    :meth:`submit` detects on the calling thread (the one that owns the pipeline and
+    its GL context), then hands the frame to a helper thread, which recognizes and
+    tracks it and calls ``on_result(result, context)`` there, frames in the order they
+    were submitted. On a multi-core machine the two halves run at the same time, so
+    frames go through at the pace of the slower half instead of the sum of both (the GL
+    detector releases the GIL while the driver works). A result comes one recognition
+    later than with :meth:`Pipeline.process`.
+
+    At most one detected frame waits for the helper: :meth:`submit` first waits until
+    the previous one has been taken, so a caller that keeps only the newest frame (the
+    node) never detects a frame that would then wait. With ``overlap=False``
+    :meth:`submit` runs :meth:`Pipeline.process` and calls ``on_result`` itself.
+
+    Args:
+        pipeline: the pipeline; created on the calling thread.
+        on_result: called with each frame's result and the submitted ``context``.
+        on_error: called when recognition of a frame raises (the helper keeps going).
+        overlap: False runs everything on the calling thread.
+
+    Call :meth:`drain` before :meth:`Pipeline.reconfigure` or :meth:`Pipeline.reset`,
+    and :meth:`close` before closing the pipeline.
+    """
+
+    def __init__(self, pipeline: Pipeline, on_result: ResultCallback,
+                 on_error: ErrorCallback, overlap: bool = True) -> None:
+        self.pipeline = pipeline
+        self.overlap = overlap
+        self._on_result = on_result
+        self._on_error = on_error
+        self._condition = threading.Condition()
+        self._waiting: tuple[DetectedFrame, Any] | None = None
+        self._busy = False
+        self._closed = False
+        self._helper: threading.Thread | None = None
+        if overlap:
+            self._helper = threading.Thread(target=self._run_helper, name='recognition',
+                                            daemon=True)
+            self._helper.start()
+
+    def wait_until_ready(self) -> None:
+        """Block until :meth:`submit` can detect at once (no frame waits for the helper)."""
+        with self._condition:
+            while self._waiting is not None and not self._closed:
+                self._condition.wait()
+
+    def submit(self, gray: np.ndarray, stamp_s: float, context: Any = None) -> None:
+        """Detect a frame here, then recognize it on the helper (see the class).
+
+        Errors of the detection (and, with ``overlap=False``, of the recognition and of
+        ``on_result``) propagate from here; with overlap, the recognition's go to
+        ``on_error``.
+
+        Raises:
+            ValueError: for an unusable frame (nothing is handed to the helper).
+            RuntimeError: after :meth:`close`.
+        """
+        if self._closed:
+            raise RuntimeError('this OverlappedPipeline was closed')
+        if not self.overlap:
+            self._on_result(self.pipeline.process(gray, stamp_s), context)
+            return
+        self.wait_until_ready()
+        detected = self.pipeline.detect(gray, stamp_s)
+        with self._condition:
+            if self._closed:
+                raise RuntimeError('this OverlappedPipeline was closed')
+            self._waiting = (detected, context)
+            self._condition.notify_all()
+
+    def drain(self) -> None:
+        """Block until every submitted frame has been recognized and reported."""
+        with self._condition:
+            while (self._waiting is not None or self._busy) and self._helper is not None \
+                    and self._helper.is_alive():
+                self._condition.wait()
+
+    def close(self) -> None:
+        """Finish the submitted frames and stop the helper (idempotent)."""
+        self.drain()
+        with self._condition:
+            self._closed = True
+            self._condition.notify_all()
+        if self._helper is not None:
+            self._helper.join()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 traceback: TracebackType | None) -> None:
+        self.close()
+
+    def _run_helper(self) -> None:
+        while True:
+            with self._condition:
+                while self._waiting is None and not self._closed:
+                    self._condition.wait()
+                if self._waiting is None:
+                    return
+                (detected, context), self._waiting = self._waiting, None
+                self._busy = True
+                self._condition.notify_all()
+            try:
+                try:
+                    result = self.pipeline.recognize(detected)
+                except Exception as err:  # noqa: BLE001 - one bad frame must not stop it
+                    self._on_error(err, context)
+                else:
+                    self._on_result(result, context)
+            except Exception:  # noqa: BLE001 - a failing callback must not stop it either
+                LOGGER.exception('result callback failed')
+            finally:
+                with self._condition:
+                    self._busy = False
+                    self._condition.notify_all()

@@ -112,15 +112,17 @@ def stamp_ns(msg: Any) -> int:
     return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
 
 
-@pytest.fixture(scope='module')
+@pytest.fixture(scope='module', params=[True, False], ids=['overlapped', 'serial'])
 def ros(request: pytest.FixtureRequest) -> Iterator[tuple[SpeedSignDetectorNode, Probe]]:
+    """The node (recognition overlapping detection, or all on the worker) and a probe."""
     os.environ['ROS_DOMAIN_ID'] = str(DOMAIN_ID)
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=DOMAIN_ID)
     # filter banks are built once and cached across test runs (pytest's cache folder)
     bank_cache = request.config.cache.mkdir('speed_sign_classifier_banks')
     node = SpeedSignDetectorNode(context=context, parameter_overrides=[
-        Parameter('classifier.cache_dir', value=str(bank_cache))])
+        Parameter('classifier.cache_dir', value=str(bank_cache)),
+        Parameter('overlap_stages', value=request.param)])
     probe = Probe(context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)

@@ -45,7 +45,9 @@ from __future__ import annotations
 import math
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -62,6 +64,9 @@ from speed_sign_detector.detection.voting_numpy import (
     vote_signs,
 )
 from speed_sign_detector.errors import DetectorError
+
+if TYPE_CHECKING:
+    import moderngl
 
 _GROUP = 8
 _VERTICES_PER_EDGE = 3
@@ -463,6 +468,69 @@ class _DrawGroup:
         return pixels[..., CHANNELS * slot:CHANNELS * (slot + 1)].copy()
 
 
+class _UnlockedCalls:
+    """The GL calls that wait for the driver, made so that other Python threads can run.
+
+    moderngl keeps the GIL during its GL calls. On llvmpipe a compute dispatch returns
+    only when the CPU threads of the driver have done the work, so a moderngl dispatch
+    stops every other thread of the process (a node's executor, the recognition of the
+    previous frame) for its whole duration. ctypes releases the GIL around foreign calls,
+    so these functions, resolved with ``eglGetProcAddress`` for the context current on
+    the calling thread, let them run. Programs and buffers are moderngl objects
+    (``.glo`` is their GL name); moderngl binds its own program and buffers again before
+    each of its calls, so mixing the two is safe.
+
+    Raises:
+        DetectorError: when libEGL or one of the functions cannot be found.
+    """
+
+    _DISPATCH_INDIRECT_BUFFER = 0x90EE
+    _ALL_BARRIER_BITS = 0xFFFFFFFF
+
+    def __init__(self) -> None:
+        import ctypes
+        import ctypes.util
+
+        name = ctypes.util.find_library('EGL') or 'libEGL.so.1'
+        try:
+            egl = ctypes.CDLL(name)
+        except OSError as err:
+            raise DetectorError(f'cannot load {name} for GL calls: {err}') from err
+        lookup = egl.eglGetProcAddress
+        lookup.restype = ctypes.c_void_p
+        lookup.argtypes = [ctypes.c_char_p]
+
+        def function(gl_name: str, *argtypes: type) -> Callable[..., None]:
+            address = lookup(gl_name.encode())
+            if not address:
+                raise DetectorError(f'eglGetProcAddress found no {gl_name}')
+            return ctypes.CFUNCTYPE(None, *argtypes)(address)
+
+        uint = ctypes.c_uint
+        self._use_program = function('glUseProgram', uint)
+        self._dispatch = function('glDispatchCompute', uint, uint, uint)
+        self._dispatch_indirect = function('glDispatchComputeIndirect', ctypes.c_ssize_t)
+        self._bind_buffer = function('glBindBuffer', uint, uint)
+        self._memory_barrier = function('glMemoryBarrier', uint)
+        self.finish = function('glFinish')
+        """Wait until the GL work queued so far is done."""
+
+    def run(self, shader: moderngl.ComputeShader, groups_x: int, groups_y: int) -> None:
+        """Dispatch ``groups_x x groups_y`` work groups of a compute shader."""
+        self._use_program(shader.glo)
+        self._dispatch(groups_x, groups_y, 1)
+
+    def run_indirect(self, shader: moderngl.ComputeShader, command: moderngl.Buffer) -> None:
+        """Dispatch a compute shader with the group counts held in ``command`` (3 uint)."""
+        self._use_program(shader.glo)
+        self._bind_buffer(self._DISPATCH_INDIRECT_BUFFER, command.glo)
+        self._dispatch_indirect(0)
+
+    def memory_barrier(self) -> None:
+        """Make the writes of earlier dispatches visible to later GL commands."""
+        self._memory_barrier(self._ALL_BARRIER_BITS)
+
+
 def _draw_groups(config: DetectorConfig,
                  bands: tuple[RadiusBand, ...]) -> list[tuple[RadiusBand, ...]]:
     """Pairs of adjacent bands that share edge level, vote level and vote directions."""
@@ -504,6 +572,7 @@ class GLVoter:
                                 ) from err
         try:
             self.renderer = str(self._ctx.info['GL_RENDERER'])
+            self._calls = _UnlockedCalls()
             self.vote_method = resolve_vote_method(config.vote_method, self.renderer)
             scatter = self.vote_method == 'scatter'
             self._pyramid = self._ctx.compute_shader(_PYRAMID_SRC)
@@ -568,6 +637,7 @@ class GLVoter:
         with self._ctx:  # current on this thread (other detectors may have their own)
             self._run_votes(gray)
             self._reduce_blocks()
+            self._calls.finish()  # wait here, without the GIL, rather than in the read
             raw = np.frombuffer(self._blocks.read(), dtype=np.float32).reshape(-1, 8)
             self._stage('readback')
         rows, cols = self._blocks_shape
@@ -654,7 +724,6 @@ class GLVoter:
         height, width = gray.shape
         self._stage(None)
         self._ensure_size(width, height)
-        ctx = self._ctx
         self._frame.write(gray.tobytes())
         self._frame.use(0)
         fused = self._levels[:_FUSED_LEVELS]
@@ -666,14 +735,15 @@ class GLVoter:
             level = fused[min(unit, len(fused) - 1)]
             self._pyramid[name] = (level.width_px, level.height_px)
         self._pyramid['levels'] = len(fused)
-        self._pyramid.run(_groups(-(-width // 4)), _groups(-(-height // 4)))
-        ctx.memory_barrier()
+        self._calls.run(self._pyramid, _groups(-(-width // 4)), _groups(-(-height // 4)))
+        self._calls.memory_barrier()
         for finer, coarser in zip(self._levels[_FUSED_LEVELS - 1:], self._levels[_FUSED_LEVELS:]):
             finer.image.bind_to_image(0, read=True, write=False)
             coarser.image.bind_to_image(1, read=False, write=True)
             self._downsample['size'] = (coarser.width_px, coarser.height_px)
-            self._downsample.run(_groups(coarser.width_px), _groups(coarser.height_px))
-            ctx.memory_barrier()
+            self._calls.run(self._downsample, _groups(coarser.width_px),
+                            _groups(coarser.height_px))
+            self._calls.memory_barrier()
         self._stage('upload_pyramid')
         self._extract['vertices_per_edge'] = _VERTICES_PER_EDGE
         self._extract['min_support'] = self._config.edge_support
@@ -686,16 +756,16 @@ class GLVoter:
             level.dispatch.write(_EMPTY_DISPATCH)
             level.ridge.bind_to_image(2, read=False, write=True)
             self._ridge['size'] = (level.width_px, level.height_px)
-            self._ridge.run(_groups(level.width_px), _groups(level.height_px))
-            ctx.memory_barrier()
+            self._calls.run(self._ridge, _groups(level.width_px), _groups(level.height_px))
+            self._calls.memory_barrier()
             level.ridge.bind_to_image(2, read=True, write=False)
             level.command.bind_to_storage_buffer(0)
             level.edges.bind_to_storage_buffer(1)
             level.dispatch.bind_to_storage_buffer(3)
             self._extract['size'] = (level.width_px, level.height_px)
-            self._extract.run(_groups(level.width_px), _groups(level.height_px))
+            self._calls.run(self._extract, _groups(level.width_px), _groups(level.height_px))
             self._stage('edges')
-        ctx.memory_barrier()
+        self._calls.memory_barrier()
         if self._scatter is not None:
             self._scatter_votes()
         else:
@@ -748,8 +818,8 @@ class GLVoter:
             level.edges.bind_to_storage_buffer(1)
             for sign in vote_signs(self._config, first):
                 scatter['vote_sign'] = sign
-                scatter.run_indirect(level.dispatch)
-                self._ctx.memory_barrier()
+                self._calls.run_indirect(scatter, level.dispatch)
+                self._calls.memory_barrier()
 
     def _reduce_blocks(self) -> None:
         rows, cols = self._blocks_shape
@@ -774,8 +844,8 @@ class GLVoter:
                 self._reduce['band'] = band.index
                 self._reduce['normaliser'] = score_normaliser(
                     len(vote_signs(self._config, band)))
-                self._reduce.run(_groups(cols), _groups(rows))
-                self._ctx.memory_barrier()
+                self._calls.run(self._reduce, _groups(cols), _groups(rows))
+                self._calls.memory_barrier()
         self._stage('reduce')
 
 

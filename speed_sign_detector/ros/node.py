@@ -5,8 +5,12 @@ Threads:
       message (a message replaced before it was processed counts as dropped), the
       diagnostics timer and the parameter callback. It never waits for processing.
     * One worker thread owns the :class:`~speed_sign_detector.pipeline.Pipeline` (and so
-      the OpenGL context, created, used and released on that thread): it converts and
-      processes the newest frame and publishes the results.
+      the OpenGL context, created, used and released on that thread): it converts the
+      newest frame and detects its candidates.
+    * With ``overlap_stages`` (the default), a recognition thread classifies and tracks
+      each detected frame while the worker detects the next one, and publishes the
+      results (:class:`~speed_sign_detector.pipeline.OverlappedPipeline`); without it
+      the worker does that too.
 
 Topics (relative, remappable): in ``image`` (sensor_msgs/Image) and ``image/compressed``
 (sensor_msgs/CompressedImage), both with sensor-data QoS (best effort, volatile, keep
@@ -64,7 +68,7 @@ from speed_sign_detector.config import (
 )
 from speed_sign_detector.errors import ConfigError, ImageConversionError, SpeedSignError
 from speed_sign_detector.image_conversion import message_to_gray
-from speed_sign_detector.pipeline import FrameResult, Pipeline
+from speed_sign_detector.pipeline import FrameResult, OverlappedPipeline, Pipeline
 from speed_sign_detector.ros.messages import (
     DiagnosticsSnapshot,
     candidates_message,
@@ -79,7 +83,7 @@ LATENCY_WINDOW = 300
 
 
 #: Parameters that cannot change while the node runs.
-READ_ONLY_PARAMETERS = frozenset({'diagnostics_period_s'})
+READ_ONLY_PARAMETERS = frozenset({'diagnostics_period_s', 'overlap_stages'})
 
 
 def parameter_descriptor(spec: ParameterSpec, read_only: bool = False) -> ParameterDescriptor:
@@ -460,6 +464,8 @@ class SpeedSignDetectorNode(Node):
             self._backend, self._renderer = pipeline.backend_name, pipeline.renderer
             self._vote_method = pipeline.vote_method
             self._fallback_reason = pipeline.fallback_reason
+            stages = OverlappedPipeline(pipeline, self._finish_frame, self._recognition_failed,
+                                        overlap=self._options.overlap_stages)
         except Exception as err:  # noqa: BLE001 - reported to the constructor
             self._worker_error = err
             self._worker_ready.set()
@@ -467,6 +473,9 @@ class SpeedSignDetectorNode(Node):
         self._worker_ready.set()
         try:
             while True:
+                # take a frame only when it can be detected at once: one that waited here
+                # would be stale, while newer ones replace it in the pending slot
+                stages.wait_until_ready()
                 with self._condition:
                     while (not self._stopping and self._pending_frame is None
                            and self._pending_config is None):
@@ -476,10 +485,12 @@ class SpeedSignDetectorNode(Node):
                     frame, self._pending_frame = self._pending_frame, None
                     config, self._pending_config = self._pending_config, None
                 if config is not None:
+                    stages.drain()
                     self._reconfigure(pipeline, config)
                 if frame is not None:
-                    self._process(pipeline, frame)
+                    self._process(stages, frame)
         finally:
+            stages.close()
             pipeline.close()
 
     def _reconfigure(self, pipeline: Pipeline, config: PipelineConfig) -> None:
@@ -494,24 +505,28 @@ class SpeedSignDetectorNode(Node):
         self.get_logger().info(f'parameters applied (backend {self._backend}, '
                                f'{self._vote_method} voting)')
 
-    def _process(self, pipeline: Pipeline, frame: ReceivedFrame) -> None:
-        """Convert, run and publish one frame (a bad one is counted and logged)."""
+    def _process(self, stages: OverlappedPipeline, frame: ReceivedFrame) -> None:
+        """Convert and detect one frame (a bad one is counted and logged); its recognition
+        and publication follow in :meth:`_finish_frame`."""
         header = frame.message.header
         stamp_ns = header.stamp.sec * 1_000_000_000 + header.stamp.nanosec
         stamp_s = stamp_ns * 1e-9 if stamp_ns > 0 else frame.received_ns * 1e-9
         try:
             gray = message_to_gray(frame.message)
-            result = pipeline.process(gray, stamp_s)
+            stages.submit(gray, stamp_s, context=(frame, gray, stamp_ns))
         except (ImageConversionError, ValueError) as err:
             self._reject(frame, str(err))
-            return
         except Exception as err:  # noqa: BLE001 - one bad frame must not stop the node
             self._reject(frame, f'{type(err).__name__}: {err}')
-            return
+
+    def _finish_frame(self, result: FrameResult,
+                      context: tuple[ReceivedFrame, np.ndarray, int]) -> None:
+        """Publish a frame's results and count it (recognition thread, or the worker)."""
+        frame, gray, stamp_ns = context
         if result.tracks_reset:
             self.get_logger().info('image stamps jumped back (a restarted source): '
                                    'tracks and the active limit were reset')
-        self._publish(gray, result, header)
+        self._publish(gray, result, frame.message.header)
         done = time.monotonic()
         with self._stats.lock:
             self._stats.processed += 1
@@ -522,6 +537,11 @@ class SpeedSignDetectorNode(Node):
                     stage, deque(maxlen=LATENCY_WINDOW)).append(duration_ms)
             if stamp_ns > 0:
                 self._stats.stamp_latency_ms.append((frame.received_ns - stamp_ns) * 1e-6)
+
+    def _recognition_failed(self, error: Exception,
+                            context: tuple[ReceivedFrame, np.ndarray, int]) -> None:
+        frame, _, _ = context
+        self._reject(frame, f'{type(error).__name__}: {error}')
 
     def _publish(self, gray: np.ndarray, result: FrameResult, header: Header) -> None:
         self._candidates_pub.publish(candidates_message(

@@ -1,0 +1,179 @@
+"""OverlappedPipeline: detection of frame N+1 on the calling thread while frame N is
+recognized on a helper thread gives the same results as Pipeline.process, in order."""
+from __future__ import annotations
+
+import dataclasses
+import threading
+from collections.abc import Iterable
+
+import cv2
+import numpy as np
+import pytest
+from scene_helpers import approach_frames, textured_background
+
+from speed_sign_detector.config import PipelineConfig
+from speed_sign_detector.detection.detector import Detector
+from speed_sign_detector.pipeline import (
+    DetectedFrame,
+    FrameResult,
+    OverlappedPipeline,
+    Pipeline,
+)
+
+FRAME_PERIOD_S = 1 / 30
+
+
+@pytest.fixture(scope='module')
+def pipeline() -> Iterable[Pipeline]:
+    with Pipeline(PipelineConfig(backend='gl')) as built:
+        yield built
+
+
+@pytest.fixture(scope='module')
+def approach() -> list[np.ndarray]:
+    """A 60 km/h sign growing over 20 gray frames on a textured background."""
+    background = textured_background(21, 640, 480)
+    return [cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
+            for frame, *_ in approach_frames('60', 20, 21, background)]
+
+
+def comparable(result: FrameResult) -> tuple:
+    """Everything of a result except its timings and track ids (which keep counting
+    across Pipeline.reset)."""
+    tracks = tuple(dataclasses.replace(track, track_id=0) for track in result.tracks)
+    return (result.stamp_s, result.width_px, result.height_px, result.detections,
+            tracks, result.active_limit_kmh, result.recognized_limit_kmh,
+            result.tracks_reset)
+
+
+@pytest.mark.parametrize('overlap', [True, False])
+def test_same_results_in_order_as_process(pipeline: Pipeline, approach: list[np.ndarray],
+                                          overlap: bool) -> None:
+    pipeline.reset()
+    serial = [pipeline.process(gray, index * FRAME_PERIOD_S)
+              for index, gray in enumerate(approach)]
+    pipeline.reset()
+    received: list[tuple[FrameResult, int, str]] = []
+
+    def on_result(result: FrameResult, context: int) -> None:
+        received.append((result, context, threading.current_thread().name))
+
+    def on_error(error: Exception, context: int) -> None:
+        raise AssertionError(f'frame {context}: {error}')
+
+    with OverlappedPipeline(pipeline, on_result, on_error, overlap=overlap) as stages:
+        for index, gray in enumerate(approach):
+            stages.submit(gray, index * FRAME_PERIOD_S, context=index)
+    assert [context for _, context, _ in received] == list(range(len(approach)))
+    assert [comparable(result) for result, _, _ in received] == [
+        comparable(result) for result in serial]
+    assert [result.recognized_limit_kmh for result in serial if result.recognized_limit_kmh
+            ] == [60]
+    helper_threads = {thread for _, _, thread in received}
+    if overlap:
+        assert helper_threads == {'recognition'}
+    else:
+        assert helper_threads == {threading.current_thread().name}
+
+
+def test_recognition_errors_go_to_on_error_and_the_helper_keeps_going(
+        pipeline: Pipeline, approach: list[np.ndarray], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    recognize = pipeline.recognize
+
+    def failing_on_frame_3(frame: DetectedFrame) -> FrameResult:
+        if frame.stamp_s == 3.0:
+            raise RuntimeError('classifier broke')
+        return recognize(frame)
+
+    monkeypatch.setattr(pipeline, 'recognize', failing_on_frame_3)
+    pipeline.reset()
+    results: list[int] = []
+    errors: list[tuple[str, int]] = []
+    with OverlappedPipeline(pipeline, lambda result, context: results.append(context),
+                            lambda error, context: errors.append((str(error), context))
+                            ) as stages:
+        for index in range(6):
+            stages.submit(approach[index], float(index), context=index)
+    assert errors == [('classifier broke', 3)]
+    assert results == [0, 1, 2, 4, 5]
+
+
+def test_a_failing_result_callback_does_not_stop_the_helper(
+        pipeline: Pipeline, approach: list[np.ndarray]) -> None:
+    pipeline.reset()
+    seen: list[int] = []
+
+    def on_result(result: FrameResult, context: int) -> None:
+        seen.append(context)
+        if context == 0:
+            raise RuntimeError('publisher gone')
+
+    with OverlappedPipeline(pipeline, on_result, lambda error, context: None) as stages:
+        for index in range(3):
+            stages.submit(approach[index], float(index), context=index)
+    assert seen == [0, 1, 2]
+
+
+def test_bad_frames_raise_from_submit_and_nothing_is_queued(pipeline: Pipeline) -> None:
+    results: list[object] = []
+    with OverlappedPipeline(pipeline, lambda result, context: results.append(context),
+                            lambda error, context: results.append(error)) as stages:
+        with pytest.raises(ValueError):
+            stages.submit(np.zeros((4, 4), np.uint8), 0.0, context='tiny')
+        with pytest.raises(ValueError):
+            stages.submit(np.zeros((480, 640, 3), np.uint8), 0.0, context='colour')
+        stages.drain()
+    assert results == []
+
+
+def test_drain_waits_for_every_frame_and_submit_after_close_fails(
+        pipeline: Pipeline, approach: list[np.ndarray]) -> None:
+    pipeline.reset()
+    results: list[int] = []
+    stages = OverlappedPipeline(pipeline, lambda result, context: results.append(context),
+                                lambda error, context: None)
+    for index in range(4):
+        stages.submit(approach[index], float(index), context=index)
+    stages.drain()
+    assert results == [0, 1, 2, 3]
+    stages.close()
+    stages.close()  # idempotent
+    with pytest.raises(RuntimeError, match='closed'):
+        stages.submit(approach[0], 10.0)
+
+
+def test_gl_detection_lets_other_threads_run(approach: list[np.ndarray]) -> None:
+    """The GL calls that wait for the driver release the GIL (what makes overlap work):
+    a Python thread keeps running while the detector's dispatches execute."""
+    with Detector(PipelineConfig().detector, backend='gl') as detector:
+        calls = detector._gl._calls  # the GL calls that wait for llvmpipe's threads
+        inside = threading.Event()
+        original_dispatch = calls._dispatch
+        steps_inside = 0
+        stop = threading.Event()
+
+        def dispatch(*groups: int) -> None:
+            inside.set()
+            try:
+                original_dispatch(*groups)
+            finally:
+                inside.clear()
+
+        def count_steps() -> None:
+            nonlocal steps_inside
+            while not stop.is_set():
+                if inside.is_set():
+                    steps_inside += 1
+
+        calls._dispatch = dispatch
+        counter = threading.Thread(target=count_steps)
+        counter.start()
+        try:
+            for gray in approach:
+                detector.detect(gray)
+        finally:
+            stop.set()
+            counter.join()
+    # with the GIL held during a dispatch the counter could not take a single step then
+    assert steps_inside > 0
