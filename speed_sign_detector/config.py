@@ -200,8 +200,11 @@ class ClassifierConfig:
                                       'radius.', low=0.0, high=1.0)
     class_score_top: int = setting(3, 'A class scores the mean PSR of its this many best '
                                    'filters (sizes x in-plane rotations).', low=1, high=15)
-    class_neighbour_classes: int = setting(4, 'At the neighbouring sizes only the filters '
-                                           'of this many leading classes are correlated.',
+    class_neighbour_classes: int = setting(4, 'Leading classes refined: at the detected '
+                                           'size every class is first correlated upright, '
+                                           'then only this many leading classes with their '
+                                           'rotated filters, and at the neighbouring sizes '
+                                           'with all their filters.',
                                            low=1, high=30)
     class_size_neighbours: int = setting(1, 'Classification filters of this many sizes on '
                                          'each side of the detected size are also tried.',

@@ -503,26 +503,40 @@ class Classifier:
         scene = enhanced if config.clahe_for_classification else raw
         # every classification filter's PSR, by class name: (psr, x, y, radius, roll)
         found: dict[str, list[tuple[float, float, float, float, float]]] = {}
-        # the detected size first (all filters), then its neighbours with the filters of
-        # the classes leading there only (coarse to fine)
+        # coarse to fine: at the detected size the upright filters of every class, then
+        # the rotated ones of the leading classes; at the neighbouring sizes all filters
+        # of those leaders
         lo = max(0, best.bank_index - config.class_size_neighbours)
         hi = min(len(self.banks) - 1, best.bank_index + config.class_size_neighbours)
-        order = [best.bank_index] + [i for i in range(lo, hi + 1) if i != best.bank_index]
-        chosen: np.ndarray | None = None
-        for index in order:
+        detected_bank = self.banks[best.bank_index]
+        upright = np.flatnonzero(detected_bank.class_rolls_deg == 0.0)
+        passes: list[tuple[int, np.ndarray | None]] = [(best.bank_index, upright),
+                                                       (best.bank_index, None)]
+        passes += [(i, None) for i in range(lo, hi + 1) if i != best.bank_index]
+        spectra: dict[int, tuple[np.ndarray, int, int]] = {}
+        leaders: set[str] | None = None
+        for pass_number, (index, chosen) in enumerate(passes):
             bank = self.banks[index]
             size = bank.class_size
-            # window of the classification size around the detected centre
-            top = int(math.floor(centre_y - size / 2.0 + 0.5))
-            left = int(math.floor(centre_x - size / 2.0 + 0.5))
-            rows = np.clip(np.arange(top, top + size), 0, largest - 1)
-            cols = np.clip(np.arange(left, left + size), 0, largest - 1)
-            sub = scene[rows[:, None], cols[None, :]]
-            field = disc_window((size, size), (centre_y - top, centre_x - left),
-                                config.class_field_radius * bank.radius_px)
-            spectrum = scene_spectrum(keep_inside(sub, field), (size, size), config.kth_law)
             if chosen is None:
-                chosen = np.arange(len(bank.class_names))
+                assert leaders is not None
+                chosen = np.flatnonzero([n in leaders for n in bank.class_names])
+                if pass_number == 1:  # the detected size: the leaders' rotated filters
+                    chosen = chosen[bank.class_rolls_deg[chosen] != 0.0]
+            if chosen.size == 0:
+                continue
+            if index not in spectra:
+                # window of the classification size around the detected centre
+                top = int(math.floor(centre_y - size / 2.0 + 0.5))
+                left = int(math.floor(centre_x - size / 2.0 + 0.5))
+                rows = np.clip(np.arange(top, top + size), 0, largest - 1)
+                cols = np.clip(np.arange(left, left + size), 0, largest - 1)
+                sub = scene[rows[:, None], cols[None, :]]
+                field = disc_window((size, size), (centre_y - top, centre_x - left),
+                                    config.class_field_radius * bank.radius_px)
+                spectra[index] = (scene_spectrum(keep_inside(sub, field), (size, size),
+                                                 config.kth_law), top, left)
+            spectrum, top, left = spectra[index]
             planes = correlate(spectrum, bank.classification[chosen], (size, size))
             # the template's centre is at size / 2: the peak lies near the offset of the
             # detected centre from the window's centre
@@ -537,10 +551,9 @@ class Classifier:
                     float(stats.psr[f]), float(left + shift_x[f] + size / 2.0),
                     float(top + shift_y[f] + size / 2.0), bank.radius_px,
                     float(bank.class_rolls_deg[filter_index])))
-            if index == best.bank_index:
-                leaders = sorted(found, key=lambda n: -max(e[0] for e in found[n]))
-                leaders = set(leaders[:config.class_neighbour_classes])
-                chosen = np.flatnonzero([n in leaders for n in bank.class_names])
+            if pass_number == 0:
+                ranked = sorted(found, key=lambda n: -max(e[0] for e in found[n]))
+                leaders = set(ranked[:config.class_neighbour_classes])
         if not found:
             return self._no_sign(x_px, y_px, radius_px)
         # a class scores the mean of its few best filters (sizes x rotations): steadier
