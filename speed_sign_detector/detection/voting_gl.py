@@ -350,67 +350,90 @@ void main() {
 
 _REDUCE_SRC = """
 #version 430
+#define MAX_BANDS 8
 layout(local_size_x = 8, local_size_y = 8) in;
-// a band's (sum w, n) votes: channel weight_channel at q + weight_offset and
-// count_channel at q + count_offset (raster: RG or BA of an RGBA32F/RG32F target, no
-// offsets; scatter: the band's two quadrants of the group's R32UI image)
-layout(binding = 0) uniform VOTE_SAMPLER votes;
+// band b's (sum w, n) votes: channel weight_channel[b] of votes[b] at q + weight_offset[b]
+// and count_channel[b] at q + count_offset[b] (raster: RG or BA of the group's
+// RGBA32F/RG32F target, no offsets; scatter: the band's two quadrants of the group's
+// R32UI image)
+layout(binding = 0) uniform VOTE_SAMPLER votes[MAX_BANDS];
 struct Best { vec4 score_x_y_radius; vec4 band_unused; };
-layout(std430, binding = 2) buffer Blocks { Best blocks[]; };
+layout(std430, binding = 2) writeonly buffer Blocks { Best blocks[]; };
 uniform ivec2 blocks_size;
-uniform ivec2 level_size;
-uniform int block_level_px;
-uniform int scale;
-uniform int target_scale;
-uniform int band;
-uniform int weight_channel;
-uniform int count_channel;
-uniform ivec2 weight_offset;
-uniform ivec2 count_offset;
+uniform ivec2 level_size[MAX_BANDS];
+uniform int block_level_px[MAX_BANDS];
+uniform int scale[MAX_BANDS];
+uniform int target_scale[MAX_BANDS];
+uniform int weight_channel[MAX_BANDS];
+uniform int count_channel[MAX_BANDS];
+uniform ivec2 weight_offset[MAX_BANDS];
+uniform ivec2 count_offset[MAX_BANDS];
+uniform float normaliser[MAX_BANDS];
+uniform int band_index[MAX_BANDS];
 uniform float vote_unit;
-uniform float normaliser;
-vec2 votes_at(ivec2 q) {
-    return vec2(float(texelFetch(votes, q + weight_offset, 0)[weight_channel]),
-                float(texelFetch(votes, q + count_offset, 0)[count_channel])) * vote_unit;
+vec2 votes_at(int b, ivec2 q) {
+    return vec2(float(texelFetch(votes[b], q + weight_offset[b], 0)[weight_channel[b]]),
+                float(texelFetch(votes[b], q + count_offset[b], 0)[count_channel[b]]))
+        * vote_unit;
 }
-float score_at(ivec2 q) {
-    return votes_at(q).x * normaliser;
+float score_at(int b, ivec2 q) {
+    return votes_at(b, q).x * normaliser[b];
 }
-float score_clamped(ivec2 q) {
-    return score_at(clamp(q, ivec2(0), level_size - 1));
+float score_clamped(int b, ivec2 q) {
+    return score_at(b, clamp(q, ivec2(0), level_size[b] - 1));
 }
 float offset(float minus, float centre, float plus) {
     float curvature = minus - 2.0 * centre + plus;
     if (curvature >= 0.0) return 0.0;
     return clamp(0.5 * (minus - plus) / curvature, -0.5, 0.5);
 }
+// the best pixel of band B in this block (B a constant: llvmpipe indexes sampler arrays
+// with a constant fast, with a variable very slowly)
+#define BAND_BLOCK(B) { \\
+    float best = -1.0; \\
+    ivec2 best_q = ivec2(0); \\
+    int side = block_level_px[B]; \\
+    ivec2 origin = block * side; \\
+    for (int dy = 0; dy < side; ++dy) { \\
+        for (int dx = 0; dx < side; ++dx) { \\
+            ivec2 q = origin + ivec2(dx, dy); \\
+            if (q.x >= level_size[B].x || q.y >= level_size[B].y) continue; \\
+            float s = score_at(B, q); \\
+            if (s > best) { best = s; best_q = q; } \\
+        } \\
+    } \\
+    if (best > 0.0 && best > winner_score) { \\
+        float ox = offset(score_clamped(B, best_q - ivec2(1, 0)), best, \\
+                          score_clamped(B, best_q + ivec2(1, 0))); \\
+        float oy = offset(score_clamped(B, best_q - ivec2(0, 1)), best, \\
+                          score_clamped(B, best_q + ivec2(0, 1))); \\
+        vec2 band_votes = votes_at(B, best_q); \\
+        float step = float(target_scale[B]); \\
+        float half_step = 0.5 * (step - 1.0); \\
+        winner_score = best; \\
+        winner = B; \\
+        winner_centre = step * (vec2(best_q) + vec2(ox, oy)) + half_step; \\
+        winner_radius = band_votes.y / band_votes.x * float(scale[B]); \\
+    } \\
+}
+// One invocation per block: the best vote pixel over all bands (the first of equal
+// scores, bands in order), refined to sub-pixel with a parabola through its neighbours.
 void main() {
     ivec2 block = ivec2(gl_GlobalInvocationID.xy);
     if (block.x >= blocks_size.x || block.y >= blocks_size.y) return;
     int index = block.y * blocks_size.x + block.x;
-    float best = -1.0;
-    ivec2 best_q = ivec2(0);
-    ivec2 origin = block * block_level_px;
-    for (int dy = 0; dy < block_level_px; ++dy) {
-        for (int dx = 0; dx < block_level_px; ++dx) {
-            ivec2 q = origin + ivec2(dx, dy);
-            if (q.x >= level_size.x || q.y >= level_size.y) continue;
-            float s = score_at(q);
-            if (s > best) { best = s; best_q = q; }
-        }
+    float winner_score = -1.0;
+    int winner = -1;
+    vec2 winner_centre = vec2(0.0);
+    float winner_radius = 0.0;
+    BAND_BLOCKS
+    if (winner < 0) {
+        blocks[index].score_x_y_radius = vec4(-1.0, 0.0, 0.0, 0.0);
+        blocks[index].band_unused = vec4(0.0);
+        return;
     }
-    if (best <= 0.0 || !(best > blocks[index].score_x_y_radius.x)) return;
-    float ox = offset(score_clamped(best_q - ivec2(1, 0)), best,
-                      score_clamped(best_q + ivec2(1, 0)));
-    float oy = offset(score_clamped(best_q - ivec2(0, 1)), best,
-                      score_clamped(best_q + ivec2(0, 1)));
-    vec2 band_votes = votes_at(best_q);
-    float radius = band_votes.y / band_votes.x * float(scale);
-    float half_step = 0.5 * float(target_scale - 1);
-    blocks[index].score_x_y_radius = vec4(best, float(target_scale) * (float(best_q.x) + ox) + half_step,
-                                          float(target_scale) * (float(best_q.y) + oy) + half_step,
-                                          radius);
-    blocks[index].band_unused = vec4(float(band), 0.0, 0.0, 0.0);
+    blocks[index].score_x_y_radius = vec4(winner_score, winner_centre, winner_radius);
+    blocks[index].band_unused = vec4(float(band_index[winner]), 0.0, 0.0, 0.0);
 }
 """
 
@@ -580,7 +603,9 @@ class GLVoter:
             self._ridge = self._ctx.compute_shader(_RIDGE_SRC)
             self._extract = self._ctx.compute_shader(_with_constants(_EDGES_SRC))
             self._reduce = self._ctx.compute_shader(_REDUCE_SRC.replace(
-                'VOTE_SAMPLER', 'usampler2D' if scatter else 'sampler2D'))
+                'VOTE_SAMPLER', 'usampler2D' if scatter else 'sampler2D').replace(
+                'BAND_BLOCKS', ' '.join(f'BAND_BLOCK({band})' for band in range(
+                    len(self._bands)))))
             self._scatter = (self._ctx.compute_shader(_with_constants(_SCATTER_SRC))
                              if scatter else None)
             self._vote = None if scatter else self._ctx.program(
@@ -599,7 +624,6 @@ class GLVoter:
         self._groups: list[_DrawGroup] = []
         self._blocks = None
         self._blocks_shape = (0, 0)
-        self._blocks_initial = b''
         self._released = False
         self.stage_ms: dict[str, float] | None = None
         self._stage_start = 0.0
@@ -695,9 +719,6 @@ class GLVoter:
         block = self._config.block_size_px
         self._blocks_shape = (-(-height // block), -(-width // block))
         self._blocks = ctx.buffer(reserve=32 * self._blocks_shape[0] * self._blocks_shape[1])
-        initial = np.zeros((self._blocks_shape[0] * self._blocks_shape[1], 8), np.float32)
-        initial[:, 0] = -1.0  # no score yet
-        self._blocks_initial = initial.tobytes()
         self._size = (width, height)
 
     def _release_size_resources(self) -> None:
@@ -822,30 +843,38 @@ class GLVoter:
                 self._calls.memory_barrier()
 
     def _reduce_blocks(self) -> None:
+        """One dispatch: per 8x8 block, the best vote pixel over every band."""
         rows, cols = self._blocks_shape
-        self._blocks.write(self._blocks_initial)
         self._blocks.bind_to_storage_buffer(2)
+        reduce = self._reduce
+        reduce['blocks_size'] = (cols, rows)
+        reduce['vote_unit'] = 1.0 / FIXED_POINT_ONE if self._scatter else 1.0
         block = self._config.block_size_px
-        self._reduce['blocks_size'] = (cols, rows)
-        self._reduce['vote_unit'] = 1.0 / FIXED_POINT_ONE if self._scatter else 1.0
-        for group in self._groups:
-            group.texture.use(0)
-            for slot, band in enumerate(group.bands):
-                weight_channel, count_channel, weight_offset, count_offset = \
-                    group.band_votes(slot)
-                self._reduce['weight_channel'] = weight_channel
-                self._reduce['count_channel'] = count_channel
-                self._reduce['weight_offset'] = weight_offset
-                self._reduce['count_offset'] = count_offset
-                self._reduce['level_size'] = group.size
-                self._reduce['block_level_px'] = max(1, block // band.target_scale)
-                self._reduce['scale'] = band.scale
-                self._reduce['target_scale'] = band.target_scale
-                self._reduce['band'] = band.index
-                self._reduce['normaliser'] = score_normaliser(
-                    len(vote_signs(self._config, band)))
-                self._calls.run(self._reduce, _groups(cols), _groups(rows))
-                self._calls.memory_barrier()
+        bands = [(group, slot, band) for group in self._groups
+                 for slot, band in enumerate(group.bands)]
+        unit_values: dict[str, list] = {name: [] for name in (
+            'level_size', 'block_level_px', 'scale', 'target_scale', 'weight_channel',
+            'count_channel', 'weight_offset', 'count_offset', 'normaliser', 'band_index')}
+        for unit, (group, slot, band) in enumerate(bands):
+            group.texture.use(unit)
+            weight_channel, count_channel, weight_offset, count_offset = group.band_votes(slot)
+            unit_values['level_size'].append(group.size)
+            unit_values['block_level_px'].append(max(1, block // band.target_scale))
+            unit_values['scale'].append(band.scale)
+            unit_values['target_scale'].append(band.target_scale)
+            unit_values['weight_channel'].append(weight_channel)
+            unit_values['count_channel'].append(count_channel)
+            unit_values['weight_offset'].append(weight_offset)
+            unit_values['count_offset'].append(count_offset)
+            unit_values['normaliser'].append(score_normaliser(len(vote_signs(self._config,
+                                                                             band))))
+            unit_values['band_index'].append(band.index)
+        for name, values in unit_values.items():
+            uniform = reduce[name]
+            padding = [values[0]] * (uniform.array_length - len(values))
+            uniform.value = values + padding
+        self._calls.run(reduce, _groups(cols), _groups(rows))
+        self._calls.memory_barrier()
         self._stage('reduce')
 
 
