@@ -771,22 +771,24 @@ class GLVoter:
         self._extract['support_cosine'] = math.cos(math.radians(SUPPORT_ANGLE_DEG))
         self._ridge['threshold'] = float(self._config.gradient_threshold)
         self._ridge['thin'] = bool(self._config.thin_edges)
+        # the levels are independent: every ridge pass, one barrier, every extraction
         for level in self._levels:
             level.image.bind_to_image(0, read=True, write=False)
-            level.command.write(_EMPTY_DRAW)
-            level.dispatch.write(_EMPTY_DISPATCH)
             level.ridge.bind_to_image(2, read=False, write=True)
             self._ridge['size'] = (level.width_px, level.height_px)
             self._calls.run(self._ridge, _groups(level.width_px), _groups(level.height_px))
-            self._calls.memory_barrier()
+            level.command.write(_EMPTY_DRAW)
+            level.dispatch.write(_EMPTY_DISPATCH)
+        self._calls.memory_barrier()
+        for level in self._levels:
             level.ridge.bind_to_image(2, read=True, write=False)
             level.command.bind_to_storage_buffer(0)
             level.edges.bind_to_storage_buffer(1)
             level.dispatch.bind_to_storage_buffer(3)
             self._extract['size'] = (level.width_px, level.height_px)
             self._calls.run(self._extract, _groups(level.width_px), _groups(level.height_px))
-            self._stage('edges')
         self._calls.memory_barrier()
+        self._stage('edges')
         if self._scatter is not None:
             self._scatter_votes()
         else:
