@@ -121,9 +121,13 @@ def peak_psr(planes: np.ndarray, centre_yx: tuple[int, int], search_half: int,
     keep = np.ones((lobe.size, lobe.size), dtype=bool)
     inner = slice(sidelobe_half - exclude_half, sidelobe_half + exclude_half + 1)
     keep[inner, inner] = False
-    sidelobes = region[:, keep]
-    mean = sidelobes.mean(axis=1)
-    std = sidelobes.std(axis=1)
+    # mean and standard deviation from the sums in one pass, in float64 (numpy's std
+    # takes two; the PSR agrees to float32 rounding)
+    sidelobes = region[:, keep].astype(np.float64)
+    count_kept = sidelobes.shape[1]
+    mean = sidelobes.sum(axis=1) / count_kept
+    variance = np.einsum('ij,ij->i', sidelobes, sidelobes) / count_kept - mean * mean
+    std = np.sqrt(np.maximum(variance, 0.0))
     psr = (peak_value - mean) / np.maximum(std, np.float32(1e-12))
     return PeakStats(peak_value, peak_y, peak_x, psr.astype(np.float32))
 
