@@ -6,12 +6,14 @@ The same maths as :mod:`speed_sign_detector.detection.voting_numpy`, kept on the
    contrast table (linear or log) into level 0 of a float pyramid and writes levels 1
    and 2 (2x2 box averages) in the same pass; further levels, if any, get one pass each;
 2. per pyramid level, two compute passes find the edge pixels: the first takes the 3x3
-   Sobel gradient, applies the threshold and the non-maximum suppression, and writes
-   each edge pixel's unit gradient direction into an RG32F image ((0, 0) elsewhere); the
-   second applies the neighbour-support test on those directions and appends the edge
-   pixels to an edge list (SSBO) with ``atomicAdd`` on the vertex count of that level's
-   indirect draw command (and on the group count of its indirect dispatch), so the CPU
-   never sees the edges;
+   Sobel gradient, applies the threshold and the non-maximum suppression, writes each
+   edge pixel's unit gradient direction into an RG32F image ((0, 0) elsewhere) and
+   appends the pixel to a list; the second, an indirect dispatch over that list only,
+   applies the neighbour-support test on the directions and appends the survivors to
+   the edge list (SSBO) with ``atomicAdd`` on the vertex count of that level's indirect
+   draw command (and on the group count of its indirect dispatch), so the CPU never
+   sees the edges. The levels are independent: all first passes run, then all second
+   passes;
 3. the votes, one draw or dispatch per group of radius bands (two bands sharing edge
    and vote levels share it; a vote goes to a band by its distance), in one of two ways
    (``DetectorConfig.vote_method``):
@@ -32,9 +34,14 @@ The same maths as :mod:`speed_sign_detector.detection.voting_numpy`, kept on the
      each), while compute work is spread over all cores;
 
    bands that vote toward both sides draw (or dispatch) twice;
-4. a compute shader scores every vote pixel and keeps, per 8x8 full-resolution block,
-   the best pixel over all bands (with a sub-pixel parabola fit); only that block list
-   (``blocks x 32`` bytes) is read back for the top-N selection.
+4. one compute dispatch scores every vote pixel and keeps, per 8x8 full-resolution
+   block, the best pixel over all bands (with a sub-pixel parabola fit); only that block
+   list (``blocks x 32`` bytes) is read back for the top-N selection.
+
+The calls that wait for the driver (dispatches, barriers, finish) are made through
+ctypes so that they release the GIL (:class:`_UnlockedCalls`): on llvmpipe the work
+runs on CPU threads, and other Python threads (the recognition of the previous frame,
+a node's executor) keep running meanwhile.
 
 One moderngl context per :class:`GLVoter`, created in its constructor and used on that
 thread only; :meth:`GLVoter.close` releases it. Per-size resources are rebuilt when the
@@ -72,6 +79,7 @@ _GROUP = 8
 _VERTICES_PER_EDGE = 3
 _FUSED_LEVELS = 3  # pyramid levels the fused upload pass writes
 _SCATTER_GROUP = 64  # edges per work group of the scatter pass
+_EXTRACT_GROUP = 64  # edge pixels per work group of the extraction (support test)
 FIXED_POINT_ONE = 65536.0
 """Scatter voting stores votes as integers in units of 1 / FIXED_POINT_ONE."""
 VOTE_METHODS = ('raster', 'scatter')
@@ -170,6 +178,12 @@ layout(local_size_x = 8, local_size_y = 8) in;
 SOBEL
 // an edge pixel's unit gradient direction g / |g|; (0, 0) elsewhere
 layout(rg32f, binding = 2) writeonly uniform image2D ridge;
+// the edge pixels in a list, and the group count of the extraction over them
+layout(std430, binding = 4) buffer Ridges {
+    uint ridge_dispatch[3];
+    uint ridge_count;
+    ivec2 ridge_pixels[];
+};
 uniform ivec2 size;
 uniform float threshold;
 uniform bool thin;
@@ -195,26 +209,37 @@ void main() {
     ivec2 p = ivec2(gl_GlobalInvocationID.xy);
     if (p.x >= size.x || p.y >= size.y) return;
     vec3 g = inner(p) ? sobel(p) : vec3(0.0);
-    imageStore(ridge, p, is_ridge(p, g) ? vec4(g.xy / g.z, 0.0, 0.0) : vec4(0.0));
+    if (is_ridge(p, g)) {
+        imageStore(ridge, p, vec4(g.xy / g.z, 0.0, 0.0));
+        uint index = atomicAdd(ridge_count, 1u);
+        ridge_pixels[index] = p;
+        if (index % uint(EXTRACT_GROUP) == 0u) atomicAdd(ridge_dispatch[0], 1u);
+    } else {
+        imageStore(ridge, p, vec4(0.0));
+    }
 }
 """.replace('SOBEL', _SOBEL_GLSL)
 
 _EDGES_SRC = """
 #version 430
-layout(local_size_x = 8, local_size_y = 8) in;
+layout(local_size_x = EXTRACT_GROUP) in;
 layout(rg32f, binding = 2) readonly uniform image2D ridge;
+layout(std430, binding = 4) readonly buffer Ridges {
+    uint ridge_dispatch[3];
+    uint ridge_count;
+    ivec2 ridge_pixels[];
+};
 layout(std430, binding = 0) buffer Command { uint command[4]; };
 layout(std430, binding = 1) writeonly buffer Edges { vec4 edges[]; };
 layout(std430, binding = 3) buffer Dispatch { uint dispatch[3]; };
-uniform ivec2 size;
 uniform uint vertices_per_edge;
 uniform int min_support;
 uniform float support_cosine;
+// one invocation per edge pixel of the ridge pass (all inner pixels)
 void main() {
-    ivec2 p = ivec2(gl_GlobalInvocationID.xy);
-    if (p.x < 1 || p.y < 1 || p.x >= size.x - 1 || p.y >= size.y - 1) return;
+    if (gl_GlobalInvocationID.x >= ridge_count) return;
+    ivec2 p = ridge_pixels[gl_GlobalInvocationID.x];
     vec2 direction = imageLoad(ridge, p).xy;
-    if (direction == vec2(0.0)) return;
     if (min_support > 0) {
         int support = 0;
         for (int dy = -1; dy <= 1; ++dy) {
@@ -449,6 +474,7 @@ class _LevelResources:
     edges: object
     command: object
     dispatch: object
+    ridges: object
 
 
 @dataclass
@@ -600,7 +626,7 @@ class GLVoter:
             scatter = self.vote_method == 'scatter'
             self._pyramid = self._ctx.compute_shader(_PYRAMID_SRC)
             self._downsample = self._ctx.compute_shader(_DOWNSAMPLE_SRC)
-            self._ridge = self._ctx.compute_shader(_RIDGE_SRC)
+            self._ridge = self._ctx.compute_shader(_with_constants(_RIDGE_SRC))
             self._extract = self._ctx.compute_shader(_with_constants(_EDGES_SRC))
             self._reduce = self._ctx.compute_shader(_REDUCE_SRC.replace(
                 'VOTE_SAMPLER', 'usampler2D' if scatter else 'sampler2D').replace(
@@ -705,7 +731,8 @@ class GLVoter:
                 ridge=ctx.texture((level_width, level_height), 2, dtype='f4'),
                 edges=ctx.buffer(reserve=16 * level_width * level_height),
                 command=ctx.buffer(reserve=16),
-                dispatch=ctx.buffer(reserve=12)))
+                dispatch=ctx.buffer(reserve=12),
+                ridges=ctx.buffer(reserve=16 + 8 * level_width * level_height)))
             level_width, level_height = level_width // 2, level_height // 2
         self._groups = []
         scatter = self.vote_method == 'scatter'
@@ -724,7 +751,8 @@ class GLVoter:
     def _release_size_resources(self) -> None:
         objects = [self._frame, self._blocks]
         for level in self._levels:
-            objects += [level.image, level.ridge, level.edges, level.command, level.dispatch]
+            objects += [level.image, level.ridge, level.edges, level.command, level.dispatch,
+                        level.ridges]
         for group in self._groups:
             objects += [group.framebuffer, group.texture]
         for item in objects:
@@ -775,6 +803,8 @@ class GLVoter:
         for level in self._levels:
             level.image.bind_to_image(0, read=True, write=False)
             level.ridge.bind_to_image(2, read=False, write=True)
+            level.ridges.write(_EMPTY_RIDGES)
+            level.ridges.bind_to_storage_buffer(4)
             self._ridge['size'] = (level.width_px, level.height_px)
             self._calls.run(self._ridge, _groups(level.width_px), _groups(level.height_px))
             level.command.write(_EMPTY_DRAW)
@@ -785,8 +815,8 @@ class GLVoter:
             level.command.bind_to_storage_buffer(0)
             level.edges.bind_to_storage_buffer(1)
             level.dispatch.bind_to_storage_buffer(3)
-            self._extract['size'] = (level.width_px, level.height_px)
-            self._calls.run(self._extract, _groups(level.width_px), _groups(level.height_px))
+            level.ridges.bind_to_storage_buffer(4)
+            self._calls.run_indirect(self._extract, level.ridges)
         self._calls.memory_barrier()
         self._stage('edges')
         if self._scatter is not None:
@@ -882,6 +912,7 @@ class GLVoter:
 
 _EMPTY_DRAW = np.array([0, 1, 0, 0], np.uint32).tobytes()
 _EMPTY_DISPATCH = np.array([0, 1, 1], np.uint32).tobytes()
+_EMPTY_RIDGES = np.array([0, 1, 1, 0], np.uint32).tobytes()  # dispatch (x, y, z), count
 
 
 def resolve_vote_method(vote_method: str, renderer: str) -> str:
@@ -902,6 +933,7 @@ def _with_constants(source: str) -> str:
     return source.replace('#version 430', '#version 430\n'
                           f'#define VERTICES_PER_EDGE {_VERTICES_PER_EDGE}\n'
                           f'#define SCATTER_GROUP {_SCATTER_GROUP}\n'
+                          f'#define EXTRACT_GROUP {_EXTRACT_GROUP}\n'
                           f'#define FIXED_POINT_ONE {FIXED_POINT_ONE:.1f}', 1)
 
 
