@@ -3,9 +3,10 @@
 
 Profiles, on the frames/crops run_all.py uses, the detector (``--backend gl`` or
 ``numpy``) at one frame size, and ``Classifier.classify_crop`` on GTSRB crops, and prints
-the functions with the most own time (``tottime``) and cumulative time. With the GL
-backend on llvmpipe the GL calls (``render``, ``read``, ``finish``) are where the CPU
-rasterizer runs; on a real GPU they would mostly wait for it.
+the functions with the most own time (``tottime``) and cumulative time, and for the GL
+backend the time of each GL stage (``GLVoter.profile_stages``). With the GL backend on
+llvmpipe the GL calls (dispatches, barriers, ``finish``) are where the CPU threads of
+the driver run; on a real GPU they would mostly wait for it.
 
 Usage::
 
@@ -59,6 +60,13 @@ def profile_detector(backend: str, size_name: str, frames: int, lines: int) -> N
             detector.detect(image)
         profile.disable()
         print(f'{backend} ({detector.renderer}) on {len(images)} frames at {size_name}')
+        if detector._gl is not None:  # GL stage times (a GPU sync after each stage)
+            detector._gl.profile_stages(True)
+            for image in images:
+                detector.detect(image)
+            stage_ms = detector._gl.stage_ms or {}
+            print(f'GL stages, {detector.vote_method} voting, ms per frame: ' + ', '.join(
+                f'{name} {total / len(images):.2f}' for name, total in stage_ms.items()))
     _print(profile, lines)
 
 
