@@ -19,7 +19,7 @@ setup(
         (f'share/{PACKAGE_NAME}/config', glob('config/*.yaml') + glob('config/*.xml')),
         (f'share/{PACKAGE_NAME}/launch', glob('launch/*.launch.py')),
     ],
-    python_requires='>=3.10',
+    python_requires='>=3.11',
     install_requires=[
         'setuptools',
         'numpy>=1.24',

@@ -37,8 +37,10 @@ Example::
       recognized as end of limit, and end-of-limit recognitions with no such sign in
       view (each wrongly cancels the active limit).
   ``fps``, ``latency_ms_p50``, ``latency_ms_p95``
-      frames per second over the whole run (reading, decoding, pipeline, writing) and
-      per-frame processing time (image conversion + pipeline), milliseconds.
+      frames per second over the whole run (reading, decoding, pipeline, writing; the
+      detection of a frame overlaps the recognition of the one before, as in the node)
+      and the pipeline's processing time per frame (detection, recognition and
+      tracking), milliseconds.
 
 A truncated or damaged bag ends the run with a non-zero exit status after the frames
 before the damage were processed, reported (the JSON line is still printed) and
@@ -55,7 +57,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -64,6 +66,9 @@ from speed_sign_detector.config import PipelineConfig, load_yaml
 from speed_sign_detector.errors import BagError, ImageConversionError, SpeedSignError
 from speed_sign_detector.recognition.classifier import LABEL_END_OF_LIMIT
 from speed_sign_detector.truth import TruthTrack, group_tracks, read_truth
+
+if TYPE_CHECKING:
+    from speed_sign_detector.pipeline import FrameResult
 
 #: Truth kinds of end-of-limit signs start with this.
 END_OF_LIMIT_PREFIX = 'end_of_limit'
@@ -358,7 +363,7 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
         SpeedSignError: (BagError, TruthFileError, ...) when nothing could be processed.
     """
     from speed_sign_detector.image_conversion import message_to_gray
-    from speed_sign_detector.pipeline import Pipeline
+    from speed_sign_detector.pipeline import OverlappedPipeline, Pipeline
 
     tracks = group_tracks(read_truth(truth_path)) if truth_path is not None else None
     stopped_by: SpeedSignError | None = None
@@ -379,38 +384,58 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
         try:
             backend, renderer = pipeline.backend_name, pipeline.renderer
             active_limit = 0
+            recognition_errors: list[SpeedSignError] = []
+
+            def finish_frame(result: FrameResult, context: tuple[int, str, np.ndarray]) -> None:
+                """Book one frame's result (recognition thread; frames in order)."""
+                nonlocal active_limit
+                stamp_ns, frame_id, gray = context
+                latencies_ms.append(result.timings_ms['total'])
+                stamps_s.append(stamp_ns * 1e-9)
+                new_events = new_limit_events(result, recognized_ids)
+                events.extend(new_events)
+                if sheet is not None:
+                    sheet.offer(len(stamps_s) - 1, gray, result, bool(new_events))
+                if result.active_limit_kmh != active_limit:
+                    active_limit = result.active_limit_kmh
+                    limit_changes.append((stamp_ns * 1e-9, active_limit))
+                if writer is not None:
+                    writer.write(stamp_ns, frame_id, gray, result)
+                bar.update(len(stamps_s), len(stamps_s) / max(
+                    time.perf_counter() - loop_started, 1e-9))
+
+            def recognition_failed(error: Exception, context: tuple[int, str, np.ndarray]
+                                   ) -> None:
+                recognition_errors.append(SpeedSignError(
+                    f'frame stamped {context[0]} ns could not be recognized: '
+                    f'{type(error).__name__}: {error}'))
+
             loop_started = time.perf_counter()
+            # detection of a frame overlaps the recognition of the one before
+            stages = OverlappedPipeline(pipeline, finish_frame, recognition_failed)
             try:
-                for item in bag.messages(image_topic.name):
+                for submitted, item in enumerate(bag.messages(image_topic.name)):
+                    if recognition_errors:
+                        raise recognition_errors[0]
                     stamp_ns = header_stamp_ns(item.message, item.log_time_ns)
-                    begin = time.perf_counter()
+                    frame_id = str(getattr(getattr(item.message, 'header', None),
+                                           'frame_id', ''))
                     try:
                         gray = message_to_gray(item.message)
-                        result = pipeline.process(gray, stamp_ns * 1e-9)
+                        stages.submit(gray, stamp_ns * 1e-9, context=(stamp_ns, frame_id, gray))
                     except ValueError as err:
                         if isinstance(err, SpeedSignError):
                             raise
                         raise ImageConversionError(
-                            f'frame {len(stamps_s)} of {image_topic.name} cannot be '
+                            f'frame {submitted} of {image_topic.name} cannot be '
                             f'processed: {err}') from err
-                    latencies_ms.append((time.perf_counter() - begin) * 1e3)
-                    stamps_s.append(stamp_ns * 1e-9)
-                    new_events = new_limit_events(result, recognized_ids)
-                    events.extend(new_events)
-                    if sheet is not None:
-                        sheet.offer(len(stamps_s) - 1, gray, result, bool(new_events))
-                    if result.active_limit_kmh != active_limit:
-                        active_limit = result.active_limit_kmh
-                        limit_changes.append((stamp_ns * 1e-9, active_limit))
-                    if writer is not None:
-                        frame_id = str(getattr(getattr(item.message, 'header', None),
-                                               'frame_id', ''))
-                        writer.write(stamp_ns, frame_id, gray, result)
-                    bar.update(len(stamps_s), len(stamps_s) / max(
-                        time.perf_counter() - loop_started, 1e-9))
+                stages.drain()
+                if recognition_errors:
+                    raise recognition_errors[0]
             except SpeedSignError as err:
                 stopped_by = err
             finally:
+                stages.close()  # the frames submitted before a failure are still booked
                 bar.finish()
                 if writer is not None:
                     writer.close()
