@@ -26,10 +26,9 @@ def kth_law(spectrum: np.ndarray, k: float) -> np.ndarray:
     spectrum = np.asarray(spectrum)
     if k == 1.0:
         return spectrum.astype(np.complex64, copy=False)
-    magnitude = np.abs(spectrum).astype(np.float32)
+    magnitude = np.abs(spectrum).astype(np.float32, copy=False)
     scale = np.zeros_like(magnitude)
-    nonzero = magnitude > 1e-12
-    scale[nonzero] = magnitude[nonzero] ** np.float32(k - 1.0)
+    np.power(magnitude, np.float32(k - 1.0), out=scale, where=magnitude > 1e-12)
     return (spectrum * scale).astype(np.complex64, copy=False)
 
 
