@@ -620,8 +620,12 @@ class GLVoter:
             raise DetectorError(f'cannot create a headless OpenGL 4.3 context (EGL): {err}'
                                 ) from err
         try:
-            self.renderer = str(self._ctx.info['GL_RENDERER'])
             self._calls = _UnlockedCalls()
+        except DetectorError:
+            self._ctx.release()
+            raise
+        try:
+            self.renderer = str(self._ctx.info['GL_RENDERER'])
             self.vote_method = resolve_vote_method(config.vote_method, self.renderer)
             scatter = self.vote_method == 'scatter'
             self._pyramid = self._ctx.compute_shader(_PYRAMID_SRC)
