@@ -19,7 +19,9 @@ import argparse
 import cProfile
 import pstats
 import sys
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import cv2
 
@@ -43,6 +45,16 @@ def _print(profile: cProfile.Profile, lines: int) -> None:
     stats.sort_stats('cumulative').print_stats(lines)
 
 
+def _profiled(call: Callable[[Any], object], items: Sequence[Any]) -> cProfile.Profile:
+    """A cProfile of ``call(item)`` for every item."""
+    profile = cProfile.Profile()
+    profile.enable()
+    for item in items:
+        call(item)
+    profile.disable()
+    return profile
+
+
 def profile_detector(backend: str, size_name: str, frames: int, lines: int) -> None:
     """Profile ``Detector.detect`` on ``frames`` of run_all's GTSDB frames."""
     size = next(s for s in run_all.DETECTOR_SIZES if s[0] == size_name)
@@ -54,11 +66,7 @@ def profile_detector(backend: str, size_name: str, frames: int, lines: int) -> N
                                 truth[name], size[1], size[2], size[3])[0] for name in files]
     with Detector(DetectorConfig(), backend=backend) as detector:
         detector.detect(images[0])  # warm-up outside the profile
-        profile = cProfile.Profile()
-        profile.enable()
-        for image in images:
-            detector.detect(image)
-        profile.disable()
+        profile = _profiled(detector.detect, images)
         print(f'{backend} ({detector.renderer}) on {len(images)} frames at {size_name}')
         if detector._gl is not None:  # GL stage times (a GPU sync after each stage)
             detector._gl.profile_stages(True)
@@ -78,11 +86,7 @@ def profile_classifier(crops: int, lines: int, params: Path | None) -> None:
     labels = labels[::max(1, len(labels) // crops)][:crops]
     images = [cv2.imread(str(label.path), cv2.IMREAD_GRAYSCALE) for label in labels]
     classifier.classify_crop(images[0])
-    profile = cProfile.Profile()
-    profile.enable()
-    for image in images:
-        classifier.classify_crop(image)
-    profile.disable()
+    profile = _profiled(classifier.classify_crop, images)
     print(f'classify_crop on {len(images)} crops')
     _print(profile, lines)
 
