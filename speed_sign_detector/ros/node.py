@@ -461,9 +461,7 @@ class SpeedSignDetectorNode(Node):
         """Own the pipeline: build it, process the newest frame until stopped, close it."""
         try:
             pipeline = Pipeline(self._pipeline_config)
-            self._backend, self._renderer = pipeline.backend_name, pipeline.renderer
-            self._vote_method = pipeline.vote_method
-            self._fallback_reason = pipeline.fallback_reason
+            self._note_backend(pipeline)
             stages = OverlappedPipeline(pipeline, self._finish_frame, self._recognition_failed,
                                         overlap=self._options.overlap_stages)
         except Exception as err:  # noqa: BLE001 - reported to the constructor
@@ -499,11 +497,15 @@ class SpeedSignDetectorNode(Node):
         except Exception as err:  # noqa: BLE001 - the node keeps its previous stages
             self._record_error(f'cannot apply the new parameters: {err}')
             return
+        self._note_backend(pipeline)
+        self.get_logger().info(f'parameters applied (backend {self._backend}, '
+                               f'{self._vote_method} voting)')
+
+    def _note_backend(self, pipeline: Pipeline) -> None:
+        """Keep what the diagnostics report of the pipeline's detector."""
         self._backend, self._renderer = pipeline.backend_name, pipeline.renderer
         self._vote_method = pipeline.vote_method
         self._fallback_reason = pipeline.fallback_reason
-        self.get_logger().info(f'parameters applied (backend {self._backend}, '
-                               f'{self._vote_method} voting)')
 
     def _process(self, stages: OverlappedPipeline, frame: ReceivedFrame) -> None:
         """Convert and detect one frame (a bad one is counted and logged); its recognition
