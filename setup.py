@@ -27,6 +27,7 @@ setup(
         'moderngl>=5.8',
         'rosbags>=0.10',
         'PyYAML>=6',
+        'tqdm>=4.64',
         # rclpy and the message packages as wheels from PyPI; on a ROS 2 Jazzy
         # install they are already on the path and colcon does not read this list.
         'ros-jazzy-rclpy>=7.1',
