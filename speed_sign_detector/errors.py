@@ -39,3 +39,11 @@ class BagError(SpeedSignError):
 
 class TruthFileError(SpeedSignError, ValueError):
     """A ground-truth file is missing, malformed or inconsistent."""
+
+
+class TrainingDataError(SpeedSignError, ValueError):
+    """Labelled training crops cannot be read (missing, empty or malformed labels)."""
+
+
+class BankFileError(ClassifierError):
+    """A filter bank file cannot be read: missing, corrupt, or of another format version."""

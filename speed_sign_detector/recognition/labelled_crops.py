@@ -1,0 +1,129 @@
+"""Labelled sign crops in the GTSRB format, and splits that keep physical signs apart.
+
+A crop folder holds ``labels.csv`` (``;``-separated, header
+``Filename;Width;Height;Roi.X1;Roi.Y1;Roi.X2;Roi.Y2;ClassId``) and the images it names.
+GTSRB file names are ``CLASS/TRACK_INDEX.png``: the images of one track are the same
+physical sign seen from an approaching car, so a fair split never puts one track on both
+sides (:func:`track_folds`).
+"""
+from __future__ import annotations
+
+import csv
+import zlib
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from speed_sign_detector.errors import TrainingDataError
+
+__all__ = ['GTSRB_CLASS_NAMES', 'LabelledCrop', 'read_crop_folder', 'track_folds']
+
+#: GTSRB class id -> the classifier's label for it: the limit in km/h as a string,
+#: ``'end_of_limit'``, or ``'other_sign'`` for the round look-alikes (negatives).
+GTSRB_CLASS_NAMES: dict[int, str] = {
+    0: '20', 1: '30', 2: '50', 3: '60', 4: '70', 5: '80', 6: 'end_of_limit', 7: '100',
+    8: '120', **{class_id: 'other_sign' for class_id in (9, 10, 15, 16, 17, 32, 33, 34, 35,
+                                                         36, 37, 38, 39, 40, 41, 42)}}
+
+
+@dataclass(frozen=True)
+class LabelledCrop:
+    """One row of ``labels.csv``.
+
+    Attributes:
+        path: the image file.
+        roi: (x1, y1, x2, y2) inclusive corners of the sign's box inside the crop, pixels.
+        class_id: GTSRB class id.
+        track: the physical sign: folder and track number (``'00001/00012'``).
+    """
+
+    path: Path
+    roi: tuple[int, int, int, int]
+    class_id: int
+    track: str
+
+    @property
+    def label(self) -> str:
+        """The classifier's label for this crop's class (:data:`GTSRB_CLASS_NAMES`)."""
+        return GTSRB_CLASS_NAMES[self.class_id]
+
+    @property
+    def sign_centre_radius(self) -> tuple[float, float, float]:
+        """(x, y, radius) of the sign from its box, crop pixels (pixel centres at +0.5)."""
+        x1, y1, x2, y2 = self.roi
+        return ((x1 + x2 + 1) / 2.0, (y1 + y2 + 1) / 2.0, (x2 - x1 + 1 + y2 - y1 + 1) / 4.0)
+
+
+def _track_of(filename: str) -> str:
+    """``'00001/00012_00029.png'`` -> ``'00001/00012'`` (folder and track number)."""
+    path = Path(filename)
+    return f'{path.parent.as_posix()}/{path.stem.split("_")[0]}'
+
+
+def read_crop_folder(folder: Path, classes: Sequence[int] | None = None
+                     ) -> list[LabelledCrop]:
+    """The rows of ``folder/labels.csv`` (of ``classes`` only, when given).
+
+    Raises:
+        TrainingDataError: when the file is missing, empty or malformed, or names a class
+            the package has no label for.
+    """
+    path = Path(folder) / 'labels.csv'
+    try:
+        with path.open(newline='') as handle:
+            rows = list(csv.DictReader(handle, delimiter=';'))
+    except (OSError, UnicodeDecodeError, csv.Error) as err:
+        raise TrainingDataError(f'cannot read {path}: {err}') from err
+    if not rows:
+        raise TrainingDataError(f'{path} is empty: it lists no crop')
+    crops: list[LabelledCrop] = []
+    for number, row in enumerate(rows, start=2):
+        try:
+            class_id = int(row['ClassId'])
+            roi = (int(row['Roi.X1']), int(row['Roi.Y1']), int(row['Roi.X2']),
+                   int(row['Roi.Y2']))
+            filename = row['Filename']
+        except (KeyError, TypeError, ValueError) as err:
+            raise TrainingDataError(
+                f'{path}:{number}: malformed row {row!r} ({err}); expected '
+                'Filename;Width;Height;Roi.X1;Roi.Y1;Roi.X2;Roi.Y2;ClassId') from err
+        if classes is not None and class_id not in classes:
+            continue
+        if class_id not in GTSRB_CLASS_NAMES:
+            raise TrainingDataError(
+                f'{path}:{number}: class {class_id} is neither a speed limit (0-8) nor a '
+                f'known look-alike ({sorted(k for k in GTSRB_CLASS_NAMES if k > 8)})')
+        crops.append(LabelledCrop(Path(folder) / filename, roi, class_id, _track_of(filename)))
+    return crops
+
+
+def track_folds(crops: Sequence[LabelledCrop], folds: int, seed: int = 0) -> np.ndarray:
+    """Fold index of every crop, such that all crops of a track share one fold.
+
+    Tracks are spread over the folds class by class (each fold gets about the same share
+    of every class), in an order fixed by ``seed`` and the track names alone.
+
+    Args:
+        crops: the labelled crops.
+        folds: number of folds (>= 2).
+        seed: changes the assignment.
+
+    Returns:
+        (len(crops),) int array of fold indices in ``[0, folds)``.
+    """
+    if folds < 2:
+        raise ValueError(f'folds must be >= 2, got {folds}')
+    tracks_by_class: dict[int, list[str]] = {}
+    for crop in crops:
+        tracks = tracks_by_class.setdefault(crop.class_id, [])
+        if crop.track not in tracks:
+            tracks.append(crop.track)
+    fold_of_track: dict[str, int] = {}
+    for class_id in sorted(tracks_by_class):
+        tracks = sorted(tracks_by_class[class_id],
+                        key=lambda name: zlib.crc32(f'{seed}:{name}'.encode()))
+        for position, name in enumerate(tracks):
+            fold_of_track[name] = position % folds
+    return np.asarray([fold_of_track[crop.track] for crop in crops], dtype=np.int64)
