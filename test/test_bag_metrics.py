@@ -3,7 +3,13 @@ from __future__ import annotations
 
 import pytest
 
-from speed_sign_detector.tools.eval_bag import LimitEvent, score_drive
+from speed_sign_detector.tools.eval_bag import (
+    DRIVE_COUNT_KEYS,
+    LimitEvent,
+    drive_metrics,
+    score_drive,
+    sum_drive_metrics,
+)
 from speed_sign_detector.truth import TruthRow, group_tracks
 
 FPS = 10.0
@@ -89,3 +95,23 @@ def test_end_of_limit_recognitions_are_matched_to_end_of_limit_signs() -> None:
     assert score.wrong_end_of_limits == 2
     assert score.wrong_limits == 0 and score.recall == 1.0
     assert score.outcomes[0].wrong_values == [0]
+
+
+def test_metrics_of_many_drives_are_their_counts_summed() -> None:
+    """Two drives scored separately, summed: counts and drive time add, the rates follow."""
+    first = score_drive(TRACKS, [LimitEvent(STAMPS[10], 50), LimitEvent(STAMPS[76], 120)],
+                        STAMPS, grace_s=0.5)
+    second = score_drive(TRACKS, [LimitEvent(STAMPS[65], 80)], STAMPS[:60])
+    summaries = [drive_metrics({key: getattr(score, key) for key in DRIVE_COUNT_KEYS},
+                               score.drive_time_s) for score in (first, second)]
+    assert summaries[0]['recall'] == first.recall
+    assert summaries[0]['false_limits_per_hour'] == first.false_limits_per_hour
+    assert first.drive_time_s == pytest.approx(10.0) and second.drive_time_s == pytest.approx(6.0)
+    total = sum_drive_metrics([*summaries, {'frames': 3}])   # a drive without truth: left out
+    assert total is not None and total['drives'] == 2
+    assert total['signs'] == first.signs + second.signs == 3 + 2
+    assert total['recognized'] == first.recognized + second.recognized == 1 + 1
+    assert total['recall'] == pytest.approx(2 / 5)
+    assert total['drive_time_s'] == pytest.approx(16.0)
+    assert total['false_limits_per_hour'] == pytest.approx(1 / (16.0 / 3600.0))
+    assert sum_drive_metrics([{'frames': 3}]) is None

@@ -32,6 +32,11 @@ Example::
       ``phantom_limits`` (no sign in view).
   ``false_limits_per_hour``
       wrong_limits per hour of drive time (stamps of the processed frames).
+  ``drive_time_s``
+      that drive time, seconds: the span of the processed frames' stamps plus one frame
+      period. Counts and drive times add up over drives: :func:`sum_drive_metrics`
+      gives the metrics of many drives (``speed_sign_eval fleet``) through the same
+      :func:`drive_metrics` a single drive's come from.
   ``end_of_limit_signs``, ``end_of_limit_recognized``, ``wrong_end_of_limits``
       end-of-limit signs in the truth (kind ``end_of_limit...``), those the pipeline
       recognized as end of limit, and end-of-limit recognitions with no such sign in
@@ -45,6 +50,11 @@ Example::
 A truncated or damaged bag ends the run with a non-zero exit status after the frames
 before the damage were processed, reported (the JSON line is still printed) and
 written to ``--out``.
+
+From Python, :func:`evaluate_bag` runs one bag and returns a :class:`BagEvaluation`
+whose ``summary`` is exactly the object ``--json`` prints (:func:`summary_json`). It can
+reuse a :class:`~speed_sign_detector.pipeline.Pipeline` built once for many bags (reset
+before each) and report each frame to a callback.
 """
 from __future__ import annotations
 
@@ -54,7 +64,7 @@ import json
 import math
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -68,7 +78,7 @@ from speed_sign_detector.recognition.classifier import LABEL_END_OF_LIMIT
 from speed_sign_detector.truth import TruthTrack, group_tracks, read_truth
 
 if TYPE_CHECKING:
-    from speed_sign_detector.pipeline import FrameResult
+    from speed_sign_detector.pipeline import FrameResult, Pipeline
 
 #: Truth kinds of end-of-limit signs start with this.
 END_OF_LIMIT_PREFIX = 'end_of_limit'
@@ -78,6 +88,16 @@ DEFAULT_GRACE_S = 1.0
 CONTACT_SHEET_FRAMES = 12
 OUTPUT_TOPICS = {'candidates': '/candidates', 'speed_limit': '/speed_limit',
                  'debug_image': '/debug_image'}
+#: Per-sign counts of a drive's summary that add up over drives (with ``drive_time_s``).
+DRIVE_COUNT_KEYS: tuple[str, ...] = (
+    'signs', 'recognized', 'wrong_limits', 'lookalike_limits', 'misread_limits',
+    'phantom_limits', 'end_of_limit_signs', 'end_of_limit_recognized',
+    'wrong_end_of_limits')
+
+FrameCallback = Callable[[int, int | None], None]
+"""``on_frame(frames_done, frames_total)`` after each frame of a bag is booked; the total
+is the bag index's message count, None when unknown (a salvaged bag). Called on the
+recognition thread."""
 
 
 @dataclass(frozen=True)
@@ -130,6 +150,78 @@ class DriveScore:
     end_of_limit_recognized: int
     wrong_end_of_limits: int
     outcomes: tuple[SignOutcome, ...]
+    drive_time_s: float = 0.0
+
+
+@dataclass(frozen=True)
+class BagEvaluation:
+    """What :func:`evaluate_bag` returns.
+
+    Attributes:
+        summary: the object ``speed_sign_eval bag --json`` prints (JSON-ready values;
+            see the module docstring for the metric fields).
+        stopped_by: the error that cut the run short (a truncated or damaged bag), None
+            when every frame was processed; ``summary`` covers the frames before it.
+    """
+
+    summary: dict[str, Any]
+    stopped_by: SpeedSignError | None = None
+
+    def to_json(self) -> str:
+        """The summary as one line of JSON (what ``--json`` prints)."""
+        return summary_json(self.summary)
+
+
+def recall_of(recognized: int, signs: int) -> float | None:
+    """recognized / signs; None when there is no sign."""
+    return recognized / signs if signs else None
+
+
+def per_hour(count: int, drive_time_s: float) -> float:
+    """``count`` per hour of ``drive_time_s`` seconds (0 when the count is 0)."""
+    if count == 0:
+        return 0.0
+    return count / max(drive_time_s / 3600.0, 1e-9)
+
+
+def drive_metrics(counts: Mapping[str, int], drive_time_s: float) -> dict[str, Any]:
+    """The per-sign metric fields of a summary from its counts.
+
+    Args:
+        counts: a value for each of :data:`DRIVE_COUNT_KEYS`.
+        drive_time_s: the drive time the counts were taken over, seconds.
+
+    Returns:
+        The counts, ``recall``, ``false_limits_per_hour`` and ``drive_time_s``, keyed as
+        in ``speed_sign_eval bag --json``.
+    """
+    metrics: dict[str, Any] = {key: int(counts[key]) for key in DRIVE_COUNT_KEYS}
+    metrics['recall'] = recall_of(metrics['recognized'], metrics['signs'])
+    metrics['false_limits_per_hour'] = per_hour(metrics['wrong_limits'], drive_time_s)
+    metrics['drive_time_s'] = drive_time_s
+    return metrics
+
+
+def sum_drive_metrics(summaries: Iterable[Mapping[str, Any]]) -> dict[str, Any] | None:
+    """The per-sign metrics of many drives: counts and drive times summed, then
+    :func:`drive_metrics`.
+
+    Args:
+        summaries: ``speed_sign_eval bag --json`` objects; those without truth (no
+            ``signs`` field) are left out.
+
+    Returns:
+        The summed metrics plus ``drives`` (how many had truth), or None when none had.
+    """
+    with_truth = [summary for summary in summaries if 'signs' in summary]
+    if not with_truth:
+        return None
+    counts = {key: sum(int(summary[key]) for summary in with_truth)
+              for key in DRIVE_COUNT_KEYS}
+    metrics = drive_metrics(counts, math.fsum(float(summary['drive_time_s'])
+                                              for summary in with_truth))
+    metrics['drives'] = len(with_truth)
+    return metrics
 
 
 def score_drive(tracks: Sequence[TruthTrack], events: Sequence[LimitEvent],
@@ -200,17 +292,17 @@ def score_drive(tracks: Sequence[TruthTrack], events: Sequence[LimitEvent],
                     if outcome.kind.startswith(END_OF_LIMIT_PREFIX)]
     recognized = sum(outcome.recognized for outcome in limit_outcomes)
     wrong = lookalike + misread + phantom
-    duration_h = max((last_stamp - first_stamp + period_s) / 3600.0, 1e-9) \
-        if stamps.size else math.inf
+    drive_time_s = last_stamp - first_stamp + period_s if stamps.size else 0.0
     return DriveScore(
         signs=len(limit_outcomes), recognized=recognized,
-        recall=recognized / len(limit_outcomes) if limit_outcomes else None,
+        recall=recall_of(recognized, len(limit_outcomes)),
         wrong_limits=wrong, lookalike_limits=lookalike, misread_limits=misread,
-        phantom_limits=phantom, false_limits_per_hour=wrong / duration_h,
+        phantom_limits=phantom, false_limits_per_hour=per_hour(wrong, drive_time_s),
         end_of_limit_signs=len(end_outcomes),
         end_of_limit_recognized=sum(outcome.recognized for outcome in end_outcomes),
         wrong_end_of_limits=wrong_ends,
-        outcomes=tuple(sorted(outcomes.values(), key=lambda outcome: outcome.first_s)))
+        outcomes=tuple(sorted(outcomes.values(), key=lambda outcome: outcome.first_s)),
+        drive_time_s=drive_time_s)
 
 
 def _is_end_of_limit(track: TruthTrack) -> bool:
@@ -352,12 +444,29 @@ class _ContactSheet:
 def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | None = None,
                  out_path: Path | None = None, debug_images: bool = False,
                  config: PipelineConfig | None = None, grace_s: float = DEFAULT_GRACE_S,
-                 progress: bool = True, contact_sheet_path: Path | None = None
-                 ) -> tuple[dict[str, Any], SpeedSignError | None]:
-    """Run a bag through the pipeline; returns (summary, error that cut the run short).
+                 progress: bool = True, contact_sheet_path: Path | None = None,
+                 pipeline: Pipeline | None = None, on_frame: FrameCallback | None = None
+                 ) -> BagEvaluation:
+    """Run a bag through the pipeline.
 
-    The summary is complete for the frames processed before an error; errors that stop
-    the run before any frame (missing bag, no image topic, bad truth file) are raised.
+    The summary is complete for the frames processed before an error (the evaluation's
+    ``stopped_by``); errors that stop the run before any frame (missing bag, no image
+    topic, bad truth file) are raised.
+
+    Args:
+        bag_path: ROS 2 bag directory, ``.mcap``/``.db3`` file or ROS 1 ``.bag`` file.
+        topic: the image topic; None finds the only one.
+        truth_path: truth CSV for the per-sign metrics, or None.
+        out_path: the results bag (ROS 2 MCAP) to create, or None.
+        debug_images: also write ``/debug_image`` into the results bag.
+        config: settings of the pipeline built for this bag (ignored with ``pipeline``).
+        grace_s: see :func:`score_drive`, seconds.
+        progress: draw a progress bar on stderr (when it is a terminal).
+        contact_sheet_path: PNG of annotated frames to write, or None.
+        pipeline: an already built pipeline to use (for many bags in a row): it is reset
+            before the bag and stays open afterwards; it must have been created on this
+            thread. None builds one from ``config`` and closes it.
+        on_frame: called after each frame, see :data:`FrameCallback`.
 
     Raises:
         SpeedSignError: (BagError, TruthFileError, ...) when nothing could be processed.
@@ -380,7 +489,12 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
         bar = _Progress(image_topic.count if progress else 0)
         bar.enabled = bar.enabled and progress
         started = time.perf_counter()
-        pipeline = Pipeline(config or PipelineConfig())
+        owns_pipeline = pipeline is None
+        if pipeline is None:
+            pipeline = Pipeline(config or PipelineConfig())
+        else:
+            pipeline.reset()   # a new drive: no tracks or active limit from the last bag
+        frames_total = image_topic.count if image_topic.count >= 0 else None
         try:
             backend, renderer = pipeline.backend_name, pipeline.renderer
             active_limit = 0
@@ -403,6 +517,8 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
                     writer.write(stamp_ns, frame_id, gray, result)
                 bar.update(len(stamps_s), len(stamps_s) / max(
                     time.perf_counter() - loop_started, 1e-9))
+                if on_frame is not None:
+                    on_frame(len(stamps_s), frames_total)
 
             def recognition_failed(error: Exception, context: tuple[int, str, np.ndarray]
                                    ) -> None:
@@ -442,7 +558,8 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
                 if sheet is not None:
                     sheet.write()
         finally:
-            pipeline.close()
+            if owns_pipeline:
+                pipeline.close()
         elapsed_s = time.perf_counter() - started
         loop_s = time.perf_counter() - loop_started
         salvage_reason = bag.salvage_reason
@@ -468,18 +585,11 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
     }
     if tracks is not None:
         score = score_drive(tracks, events, stamps_s, grace_s)
-        summary.update({
-            'truth': str(truth_path), 'grace_s': grace_s,
-            'signs': score.signs, 'recognized': score.recognized, 'recall': score.recall,
-            'wrong_limits': score.wrong_limits, 'lookalike_limits': score.lookalike_limits,
-            'misread_limits': score.misread_limits, 'phantom_limits': score.phantom_limits,
-            'false_limits_per_hour': score.false_limits_per_hour,
-            'end_of_limit_signs': score.end_of_limit_signs,
-            'end_of_limit_recognized': score.end_of_limit_recognized,
-            'wrong_end_of_limits': score.wrong_end_of_limits,
-            'per_sign': [asdict(outcome) for outcome in score.outcomes],
-        })
-    return summary, stopped_by
+        summary.update({'truth': str(truth_path), 'grace_s': grace_s})
+        summary.update(drive_metrics({key: getattr(score, key) for key in DRIVE_COUNT_KEYS},
+                                     score.drive_time_s))
+        summary['per_sign'] = [asdict(outcome) for outcome in score.outcomes]
+    return BagEvaluation(summary, stopped_by)
 
 
 def format_report(summary: dict[str, Any]) -> str:
@@ -570,16 +680,21 @@ def run(args: argparse.Namespace) -> int:
     if args.debug_images and args.out is None:
         print('speed_sign_eval bag: --debug-images has no effect without --out',
               file=sys.stderr)
-    summary, stopped_by = evaluate_bag(args.bag, args.topic, args.truth, args.out,
-                                       args.debug_images, config, args.grace,
-                                       contact_sheet_path=args.contact_sheet)
+    evaluation = evaluate_bag(args.bag, args.topic, args.truth, args.out,
+                              args.debug_images, config, args.grace,
+                              contact_sheet_path=args.contact_sheet)
     if args.json:
-        print(json.dumps(summary, default=_json_default))
+        print(evaluation.to_json())
     else:
-        print(format_report(summary))
-    if stopped_by is not None:
-        raise stopped_by
+        print(format_report(evaluation.summary))
+    if evaluation.stopped_by is not None:
+        raise evaluation.stopped_by
     return 0
+
+
+def summary_json(summary: Mapping[str, Any]) -> str:
+    """A summary as one line of JSON, as ``speed_sign_eval bag --json`` prints it."""
+    return json.dumps(summary, default=_json_default)
 
 
 def _json_default(value: Any) -> Any:
