@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 INSTALLED := $(VENV)/.installed
 OUT ?= out
 
-.PHONY: demo live-demo test bench clean
+.PHONY: demo live-demo test bench bank clean
 
 $(INSTALLED): setup.py package.xml pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -39,6 +39,12 @@ live-demo: $(INSTALLED)
 ## test: the test suite (what .ci/run runs)
 test: $(INSTALLED)
 	$(BIN)/python -m pytest -q
+
+## bank: rebuild the shipped filter bank from ../shared/data (reproducible: fixed seed)
+DATA ?= ../shared/data
+bank: $(INSTALLED)
+	$(BIN)/speed_sign_train build speed_sign_detector/recognition/data/default_bank.npz \
+		$(DATA)/gtsrb-dev $(DATA)/gtsrb-lookalikes-dev
 
 ## bench: accuracy and speed against the peers, written to out/bench/
 bench: $(INSTALLED)

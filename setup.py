@@ -38,7 +38,8 @@ setup(
         'test': ['pytest>=7', 'colcon-core', 'colcon-ros'],
         'bench': ['radsym', 'matplotlib'],
     },
-    zip_safe=True,
+    package_data={PACKAGE_NAME: ['recognition/data/*.npz']},
+    zip_safe=False,
     maintainer='speed_sign_detector maintainers',
     maintainer_email='maintainers@speed-sign-detector.invalid',
     description='Real-time EU speed-limit sign detection and recognition (GPU RSD + FFT MACE).',
@@ -50,6 +51,7 @@ setup(
             'speed_sign_synth = speed_sign_detector.tools.synth:main',
             'speed_sign_replay = speed_sign_detector.tools.replay:main',
             'speed_sign_monitor = speed_sign_detector.tools.monitor:main',
+            'speed_sign_train = speed_sign_detector.tools.train:main',
         ],
     },
 )

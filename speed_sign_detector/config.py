@@ -216,6 +216,15 @@ class ClassifierConfig:
                                high=16)
     clahe_for_classification: bool = setting(False, 'Classify on the CLAHE-enhanced ROI '
                                              '(else CLAHE serves detection only).')
+    crop_framing: str = setting('margin', 'How crops given to classify_crop frame the sign: '
+                                '"margin" (GTSRB: ~10% margin), "tight" (the box is the '
+                                'sign) or "auto" (either; costs ~2% accuracy on GTSRB '
+                                'crops against the right framing).', choices=('auto', 'margin',
+                                                                      'tight'))
+    bank_file: str = setting('', 'Trained filter bank file (speed_sign_train build): real '
+                             'examples in the composite filters and the second opinion. '
+                             '"" = the bank shipped with the package, "none" = rendered '
+                             'templates only.')
     cache_dir: str = setting('~/.cache/speed_sign_detector', 'Folder to cache the built '
                              'filter banks in, keyed by every parameter that shapes them '
                              '("" = build at every start, ~3-5 s).')

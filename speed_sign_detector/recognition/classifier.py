@@ -36,7 +36,7 @@ import numpy as np
 
 from speed_sign_detector.config import ClassifierConfig
 from speed_sign_detector.detection.candidates import Candidate
-from speed_sign_detector.errors import ClassifierInputError
+from speed_sign_detector.errors import BankFileError, ClassifierInputError
 from speed_sign_detector.recognition.correlation import (
     correlate,
     disc_window,
@@ -50,6 +50,16 @@ from speed_sign_detector.recognition.filter_banks import (  # noqa: F401 (re-exp
     SizeBank,
     bank_radii,
     build_banks,
+)
+from speed_sign_detector.recognition.sign_features import (
+    FEATURE_SIZE,
+    aligned_patches,
+    sign_features,
+)
+from speed_sign_detector.recognition.trained_bank import (
+    TrainedBank,
+    load_trained_bank,
+    resolve_bank_file,
 )
 
 #: Labels that are not a speed limit.
@@ -140,10 +150,31 @@ class Classifier:
     the filters; see :attr:`build_time_s` and :attr:`bank_nbytes`.
     """
 
-    def __init__(self, config: ClassifierConfig = ClassifierConfig()) -> None:
+    def __init__(self, config: ClassifierConfig = ClassifierConfig(),
+                 trained_bank: TrainedBank | None = None) -> None:
+        """Build the filter banks.
+
+        Args:
+            config: the classifier's settings.
+            trained_bank: the trained parts to use; by default the file named by
+                ``config.bank_file`` (the shipped bank when empty, none for ``'none'``).
+
+        Raises:
+            BankFileError: when the bank file named cannot be read.
+            ClassifierError: when the filter banks cannot be built.
+        """
         self.config = config
         start = time.perf_counter()
-        self.banks: tuple[SizeBank, ...] = build_banks(config)
+        if trained_bank is None:
+            path = resolve_bank_file(config.bank_file)
+            trained_bank = load_trained_bank(path) if path is not None else TrainedBank(None)
+        opinion = trained_bank.second_opinion
+        if opinion is not None and opinion.feature_mean.size != FEATURE_SIZE:
+            raise BankFileError(f'the trained bank\'s second opinion takes '
+                                f'{opinion.feature_mean.size} features, this package computes '
+                                f'{FEATURE_SIZE}: rebuild it with speed_sign_train build')
+        self.trained_bank = trained_bank
+        self.banks: tuple[SizeBank, ...] = build_banks(config, trained_bank.class_examples)
         self.build_time_s = time.perf_counter() - start
         self._radii = np.asarray([bank.radius_px for bank in self.banks])
         tiles = (config.clahe_tiles, config.clahe_tiles)
@@ -182,28 +213,54 @@ class Classifier:
         return tuple(self._classify_at(gray, c.x_px, c.y_px, c.radius_px * scale)
                      for c in candidates)
 
-    def classify_crop(self, crop: np.ndarray) -> Classification:
+    def classify_crop(self, crop: np.ndarray, framing: str | None = None) -> Classification:
         """Classify a crop holding one centred sign.
-
-        The crop is taken to frame the sign like GTSRB crops do: a margin of 10% of the
-        sign's size but at least 5 pixels on each side; the detection filters then find
-        the exact size and position.
 
         Args:
             crop: (h, w) uint8 gray crop.
+            framing: how the crop frames the sign (default ``config.crop_framing``):
+                ``'margin'`` as GTSRB crops do (a margin of 10% of the sign's size but at
+                least 5 pixels on each side), ``'tight'`` (the box is the sign), or
+                ``'auto'`` (either: the size search spans both). The detection filters
+                then find the exact size and position.
 
         Returns:
             The classification; ``x_px``/``y_px`` are crop pixels. A crop too small for
             any sign (radius below ``min_sign_radius_px``) is answered ``'no_sign'``.
 
         Raises:
-            ClassifierInputError: for an empty or non-2-D / non-uint8 array.
+            ClassifierInputError: for an empty or non-2-D / non-uint8 array, or an
+                unknown framing.
         """
         crop = _check_gray(crop, 'crop')
+        evidence = self.crop_evidence(crop, framing)
+        return evidence if isinstance(evidence, Classification) else self._decide(crop, evidence)
+
+    def crop_evidence(self, crop: np.ndarray, framing: str | None = None
+                      ) -> CorrelationEvidence | Classification:
+        """:meth:`evidence_at` for a crop framed as :meth:`classify_crop` takes it; for
+        ``'auto'`` framing both framings are tried and the one whose detection filter
+        finds the sign more clearly (higher PSR) wins."""
+        crop = _check_gray(crop, 'crop')
         height, width = crop.shape
-        side = float(min(height, width))
-        sign_size = min(side / 1.2, side - 10.0) if side > 10.0 else side / 1.2
-        return self._classify_at(crop, width / 2.0, height / 2.0, sign_size / 2.0)
+        framing = framing or self.config.crop_framing
+        framings = ('margin', 'tight') if framing == 'auto' else (framing,)
+        best: CorrelationEvidence | Classification | None = None
+        for name in framings:
+            found = self.evidence_at(crop, width / 2.0, height / 2.0,
+                                     crop_sign_radius(crop.shape, name))
+            if best is None or _detection_psr(found) > _detection_psr(best):
+                best = found
+        assert best is not None
+        return best
+
+    def decide(self, gray: np.ndarray, evidence: CorrelationEvidence | Classification,
+               use_second_opinion: bool = True) -> Classification:
+        """The answer for :meth:`evidence_at`'s result (as :meth:`classify` gives it);
+        ``use_second_opinion=False`` decides by the correlation filters alone."""
+        if isinstance(evidence, Classification):
+            return evidence
+        return self._decide(gray, evidence, use_second_opinion)
 
     # -- internals ---------------------------------------------------------------------
 
@@ -346,23 +403,40 @@ class Classifier:
             return evidence
         return self._decide(gray, evidence)
 
-    def _decide(self, gray: np.ndarray, evidence: CorrelationEvidence) -> Classification:
-        """The answer from the correlation evidence: the leading class, or "no sign" when
-        its PSR or lead is too small or the sign is cut by the frame border."""
+    def _decide(self, gray: np.ndarray, evidence: CorrelationEvidence,
+                use_second_opinion: bool = True) -> Classification:
+        """The answer from the correlation evidence: the leading class (or the second
+        opinion's choice among the leading classes), or "no sign" when the PSR or the lead
+        is too small, the second opinion withholds it, or the sign is cut by the frame
+        border."""
         config = self.config
-        winner, winner_psr = evidence.ranked[0]
-        label = _label_of(winner)
-        runner_up = next((p for n, p in evidence.ranked[1:] if _label_of(n) != label), -np.inf)
-        margin = winner_psr - runner_up if math.isfinite(runner_up) else winner_psr
+        labels = [_label_of(name) for name, _ in evidence.ranked]
+        label = labels[0]
         frame_x, frame_y, size_radius = evidence.x_px, evidence.y_px, evidence.radius_px
         roll = evidence.rotation_deg
         height, width = gray.shape
-        cut_px = max(-frame_x, -frame_y, frame_x - (width - 1), frame_y - (height - 1)) + size_radius
-        if (winner_psr < config.psr_threshold or (label.isdigit() and margin < config.min_margin)
-                or cut_px > config.max_cut_fraction * size_radius):
-            return Classification(LABEL_NO_SIGN, None, winner_psr, size_radius, roll, margin,
+        cut_px = max(-frame_x, -frame_y, frame_x - (width - 1),
+                     frame_y - (height - 1)) + size_radius
+        withhold = (evidence.ranked[0][1] < config.psr_threshold
+                    or cut_px > config.max_cut_fraction * size_radius)
+        opinion = self.trained_bank.second_opinion if use_second_opinion else None
+        if opinion is not None and not withhold:
+            scores = opinion.scores(sign_features(aligned_patches(
+                gray, np.asarray([[frame_x, frame_y, size_radius]]))))[0]
+            choice = opinion.choose(scores, labels, self.trained_bank.candidates,
+                                    self.trained_bank.min_lead)
+            withhold = choice is None
+            label = choice if choice is not None else label
+        psr = next(p for (_, p), name in zip(evidence.ranked, labels) if name == label)
+        runner_up = next((p for (_, p), name in zip(evidence.ranked, labels) if name != label),
+                         -np.inf)
+        margin = psr - runner_up if math.isfinite(runner_up) else psr
+        if opinion is None and label.isdigit() and margin < config.min_margin:
+            withhold = True
+        if withhold:
+            return Classification(LABEL_NO_SIGN, None, psr, size_radius, roll, margin,
                                   frame_x, frame_y)
-        return Classification(label, int(label) if label.isdigit() else None, winner_psr,
+        return Classification(label, int(label) if label.isdigit() else None, psr,
                               size_radius, roll, margin, frame_x, frame_y)
 
     def _detect(self, roi: np.ndarray, indices: Sequence[int], largest: int,
@@ -391,6 +465,30 @@ class Classifier:
         sidelobe = max(5, int(round(self.config.sidelobe_window * radius_px)))
         exclude = max(1, int(round(self.config.sidelobe_exclude * radius_px)))
         return sidelobe, min(exclude, sidelobe - 1)
+
+
+def _detection_psr(found: CorrelationEvidence | Classification) -> float:
+    return found.detection_psr if isinstance(found, CorrelationEvidence) else found.psr
+
+
+#: Crop framings :meth:`Classifier.classify_crop` accepts.
+CROP_FRAMINGS: tuple[str, ...] = ('auto', 'margin', 'tight')
+
+
+def crop_sign_radius(shape: tuple[int, ...], framing: str) -> float:
+    """The sign radius to search around for a crop of ``shape`` (h, w), pixels.
+
+    ``'margin'``: GTSRB framing, a margin of 10% of the sign's size but at least 5 pixels
+    each side; ``'tight'``: the sign fills the box. (``'auto'`` tries both:
+    :meth:`Classifier.crop_evidence`.)
+    """
+    if framing not in CROP_FRAMINGS or framing == 'auto':
+        raise ClassifierInputError(f'unknown crop framing {framing!r}; expected one of '
+                                   f'{", ".join(CROP_FRAMINGS)}')
+    side = float(min(shape[0], shape[1]))
+    if framing == 'tight':
+        return side / 2.0
+    return (min(side / 1.2, side - 10.0) if side > 10.0 else side / 1.2) / 2.0
 
 
 def _check_gray(image: np.ndarray, name: str) -> np.ndarray:

@@ -16,7 +16,7 @@ import hashlib
 import json
 import logging
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,7 +24,8 @@ import cv2
 import numpy as np
 
 from speed_sign_detector.config import ClassifierConfig
-from speed_sign_detector.errors import ClassifierError
+from speed_sign_detector.errors import BankFileError, ClassifierError
+from speed_sign_detector.recognition.bank_file import load_bank_file, save_bank_file
 from speed_sign_detector.recognition.correlation import disc_window, keep_inside
 from speed_sign_detector.recognition.mace import mace_filters, training_spectra
 from speed_sign_detector.recognition.templates import (
@@ -41,7 +42,7 @@ _LOG = logging.getLogger(__name__)
 #: Side of the high-resolution renderings the filter views are reduced from, pixels.
 MASTER_PX = 512
 #: Bump when the bank construction changes, so cached banks are rebuilt.
-BANK_VERSION = 5
+BANK_VERSION = 6
 #: Out-of-plane views combined in each composite filter: yaw (about the vertical axis)
 #: and pitch (about the horizontal axis), degrees (DAGM 2010 base configuration).
 YAW_VIEWS_DEG: tuple[float, ...] = (0.0, 10.0, -10.0, 20.0, -20.0, 30.0, -30.0)
@@ -157,8 +158,23 @@ def _keep_inside_each(images: np.ndarray, window: np.ndarray) -> np.ndarray:
     return images * window + means * (1.0 - window)
 
 
+def _examples_at_size(examples: np.ndarray, radius_px: float, side: int, roll_deg: float
+                      ) -> np.ndarray:
+    """Canonical real examples (sign radius PATCH_PX / 2, :mod:`.sign_features`) resampled
+    to a sign of ``radius_px`` centred on a (side, side) canvas, rotated by ``roll_deg``
+    counter-clockwise; (M, side, side) float32."""
+    half = examples.shape[-1] / 2.0
+    matrix = cv2.getRotationMatrix2D((half, half), roll_deg, radius_px / half)
+    matrix[:, 2] += side / 2.0 - half
+    flags = cv2.INTER_AREA if radius_px < half else cv2.INTER_LINEAR
+    return np.stack([cv2.warpAffine(np.asarray(example, np.float32), matrix, (side, side),
+                                    flags=flags, borderMode=cv2.BORDER_REPLICATE)
+                     for example in examples])
+
+
 def build_size_bank(radius_px: float, config: ClassifierConfig,
-                    masters: dict[str, np.ndarray]) -> SizeBank:
+                    masters: dict[str, np.ndarray],
+                    class_examples: Mapping[str, np.ndarray] | None = None) -> SizeBank:
     """Synthesize the detection and classification filters of one sign size.
 
     Each kind's views are warped once (all kinds in one warp per view), the training
@@ -170,7 +186,11 @@ def build_size_bank(radius_px: float, config: ClassifierConfig,
         radius_px: sign radius of the templates, pixels.
         config: classifier configuration.
         masters: high-resolution renderings by kind (:func:`.templates.render_master`).
+        class_examples: class name -> (M, P, P) canonical real examples (mean images of
+            labelled crops, :mod:`.training`) that join the renderings in that class's
+            classification filters.
     """
+    class_examples = class_examples or {}
     canvas, fft_size, class_size = _geometry_of_size(radius_px, config)
     shape = (fft_size, fft_size)
     per_roll = len(YAW_VIEWS_DEG) * len(PITCH_VIEWS_DEG)
@@ -205,6 +225,10 @@ def build_size_bank(radius_px: float, config: ClassifierConfig,
             else:  # several templates in one filter: frontal and +-20 deg yaw views
                 filter_images.append(np.concatenate(
                     [views[kind_index[kind], roll_index, _MULTI_KIND_VIEWS] for kind in kinds]))
+            if name in class_examples and len(class_examples[name]):
+                real = _keep_inside_each(_examples_at_size(class_examples[name], radius_px,
+                                                           class_size, roll), field)
+                filter_images[-1] = np.concatenate([filter_images[-1], real])
             names.append(name)
             rolls.append(roll)
     spectra_all = training_spectra(np.concatenate(filter_images), shape, config.kth_law)
@@ -220,19 +244,27 @@ def build_size_bank(radius_px: float, config: ClassifierConfig,
                     np.conj(classification), tuple(names), np.asarray(rolls, np.float32))
 
 
-def _bank_key(config: ClassifierConfig) -> str:
+def _bank_key(config: ClassifierConfig, class_examples: Mapping[str, np.ndarray]) -> str:
     relevant = {name: getattr(config, name) for name in (
         'kth_law', 'noise_tradeoff', 'min_radius_px', 'max_radius_px', 'radius_step',
         'canvas_margin', 'position_search', 'class_field_radius')}
     relevant.update(version=BANK_VERSION, geometry=dataclasses.asdict(GRAY_TEMPLATE_GEOMETRY),
                     yaws=YAW_VIEWS_DEG, pitches=PITCH_VIEWS_DEG, rolls=ROLLS_DEG,
-                    classes=CLASS_TEMPLATES, detection=DETECTION_KINDS)
+                    classes=CLASS_TEMPLATES, detection=DETECTION_KINDS,
+                    examples={name: hashlib.sha256(np.ascontiguousarray(
+                        examples, np.float32).tobytes()).hexdigest()
+                        for name, examples in sorted(class_examples.items())})
     text = json.dumps(relevant, sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def build_banks(config: ClassifierConfig) -> tuple[SizeBank, ...]:
+def build_banks(config: ClassifierConfig,
+                class_examples: Mapping[str, np.ndarray] | None = None
+                ) -> tuple[SizeBank, ...]:
     """All size banks for ``config``, from the cache folder when one is configured.
+
+    ``class_examples`` (class name -> (M, P, P) canonical real examples) join the
+    renderings in the classification filters (:func:`build_size_bank`).
 
     A cache that cannot be read is rebuilt; one that cannot be written is logged.
 
@@ -241,17 +273,19 @@ def build_banks(config: ClassifierConfig) -> tuple[SizeBank, ...]:
     """
     cache_file = None
     if config.cache_dir:
-        cache_file = Path(config.cache_dir).expanduser() / f'filter_banks_{_bank_key(config)}.npz'
+        key = _bank_key(config, class_examples or {})
+        cache_file = Path(config.cache_dir).expanduser() / f'filter_banks_{key}.npz'
         if cache_file.is_file():
             try:
                 return _load_banks(cache_file)
-            except (OSError, ValueError, KeyError) as err:
-                _LOG.warning('ignoring unreadable filter bank cache %s: %s', cache_file, err)
+            except BankFileError as err:  # whatever is wrong with a cache: rebuild it
+                _LOG.warning('rebuilding the filter bank cache: %s', err)
     try:
         kinds = set(DETECTION_KINDS).union(*CLASS_TEMPLATES.values())
         masters = {kind: render_master(kind, MASTER_PX, GRAY_TEMPLATE_GEOMETRY)
                    for kind in sorted(kinds)}
-        banks = tuple(build_size_bank(radius, config, masters) for radius in bank_radii(config))
+        banks = tuple(build_size_bank(radius, config, masters, class_examples)
+                      for radius in bank_radii(config))
     except (ValueError, np.linalg.LinAlgError, cv2.error) as err:
         raise ClassifierError(f'cannot build the filter banks: {err}') from err
     if cache_file is not None:
@@ -264,8 +298,10 @@ def build_banks(config: ClassifierConfig) -> tuple[SizeBank, ...]:
     return banks
 
 
+_CACHE_FORMAT = 'speed_sign_detector.filter_bank_cache'
+
+
 def _save_banks(path: Path, banks: Sequence[SizeBank]) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
     arrays: dict[str, np.ndarray] = {'count': np.asarray(len(banks))}
     for index, bank in enumerate(banks):
         arrays[f'{index}_meta'] = np.asarray([bank.radius_px, bank.canvas_px, bank.fft_size,
@@ -274,13 +310,13 @@ def _save_banks(path: Path, banks: Sequence[SizeBank]) -> None:
         arrays[f'{index}_classification'] = bank.classification
         arrays[f'{index}_names'] = np.asarray(bank.class_names)
         arrays[f'{index}_rolls'] = bank.class_rolls_deg
-    temporary = path.with_suffix('.tmp.npz')
-    np.savez(temporary, **arrays)
-    temporary.replace(path)
+    save_bank_file(path, arrays, {}, _CACHE_FORMAT, BANK_VERSION)
 
 
 def _load_banks(path: Path) -> tuple[SizeBank, ...]:
-    with np.load(path) as data:
+    """The cached banks; :class:`BankFileError` for a file that is not a readable cache."""
+    data, _ = load_bank_file(path, _CACHE_FORMAT, (BANK_VERSION,))
+    try:
         banks = []
         for index in range(int(data['count'])):
             radius, canvas, fft_size, class_size = data[f'{index}_meta']
@@ -288,4 +324,6 @@ def _load_banks(path: Path) -> tuple[SizeBank, ...]:
                                   data[f'{index}_detection'], data[f'{index}_classification'],
                                   tuple(str(n) for n in data[f'{index}_names']),
                                   data[f'{index}_rolls']))
+    except (KeyError, ValueError, TypeError) as err:
+        raise BankFileError(f'{path} is not a complete filter bank cache ({err})') from err
     return tuple(banks)

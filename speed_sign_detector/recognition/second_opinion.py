@@ -1,0 +1,129 @@
+"""The second opinion: a linear model on sign features that chooses among the classes the
+correlation filters ranked highest, or withholds the answer.
+
+It never adds a class: it picks one of the correlation's ``candidates`` leading labels,
+and only when it agrees that this label is the best of all it knows, with a lead of at
+least ``min_lead``. A class it has no examples of (a limit with no real crops, such as
+130 km/h) is left to the correlation filters, unless the model confidently reads another
+limit there, in which case the answer is withheld.
+
+The model is ridge regression onto +-1 class indicators (one-vs-rest), solved in closed
+form with numpy on standardised :mod:`.sign_features`; its scores are comparable across
+classes, and a lead of 0.3-0.5 between the best two is a confident answer.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ['SecondOpinion', 'fit_second_opinion']
+
+
+@dataclass(frozen=True)
+class SecondOpinion:
+    """A trained linear model over sign features.
+
+    Attributes:
+        labels: (C,) the labels it scores: limits as km/h strings, ``'end_of_limit'``,
+            ``'other_sign'``.
+        feature_mean: (D,) float32 mean of the training features.
+        feature_scale: (D,) float32 standard deviation of the training features.
+        weights: (D, C) float32 ridge weights on the standardised features.
+        bias: (C,) float32.
+    """
+
+    labels: tuple[str, ...]
+    feature_mean: np.ndarray
+    feature_scale: np.ndarray
+    weights: np.ndarray
+    bias: np.ndarray
+
+    def scores(self, features: np.ndarray) -> np.ndarray:
+        """(N, C) scores of (N, D) feature vectors (about +1 for the class, -1 else)."""
+        standardised = (np.asarray(features, np.float32) - self.feature_mean) \
+            / self.feature_scale
+        return standardised @ self.weights + self.bias
+
+    def choose(self, scores: np.ndarray, ranked_labels: Sequence[str], candidates: int,
+               min_lead: float) -> str | None:
+        """The label to answer for one sign, or ``None`` to withhold.
+
+        Args:
+            scores: (C,) this model's scores of the sign.
+            ranked_labels: the correlation filters' labels, best first (repeats allowed).
+            candidates: how many of the leading distinct labels the model may choose from.
+            min_lead: least lead of the chosen label over the model's next best label.
+
+        Returns:
+            One of ``ranked_labels`` or ``None``.
+        """
+        distinct: list[str] = []
+        for label in ranked_labels:
+            if label not in distinct:
+                distinct.append(label)
+        if not distinct:
+            return None
+        order = np.argsort(-scores)
+        model_best = self.labels[int(order[0])]
+        lead = float(scores[order[0]] - scores[order[1]]) if len(order) > 1 else np.inf
+        if distinct[0] not in self.labels:
+            # no examples of the correlation's winner: it stands unless the model
+            # confidently reads another limit
+            if model_best.isdigit() and lead >= min_lead:
+                return None
+            return distinct[0]
+        allowed = [label for label in distinct[:candidates] if label in self.labels]
+        if model_best not in allowed or lead < min_lead:
+            return None
+        return model_best
+
+
+def fit_second_opinion(features: np.ndarray, labels: Sequence[str], ridge: float,
+                       weights: np.ndarray | None = None) -> SecondOpinion:
+    """Fit the model in closed form.
+
+    Args:
+        features: (N, D) float feature vectors.
+        labels: (N,) label of each.
+        ridge: Tikhonov regularisation (> 0) on the standardised features.
+        weights: optional (N,) sample weights (for example to balance classes).
+
+    Returns:
+        The fitted :class:`SecondOpinion`.
+    """
+    features = np.asarray(features, np.float32)
+    if features.ndim != 2 or len(features) != len(labels) or len(features) == 0:
+        raise ValueError(f'features must be (N, D) with one label per row, got '
+                         f'{features.shape} for {len(labels)} labels')
+    if ridge <= 0:
+        raise ValueError(f'ridge must be > 0, got {ridge}')
+    names = tuple(sorted(set(labels), key=lambda n: (not n.isdigit(), int(n) if n.isdigit()
+                                                      else 0, n)))
+    if len(names) < 2:
+        raise ValueError(f'need examples of at least two labels, got {names}')
+    index = np.asarray([names.index(label) for label in labels])
+    sample = np.ones(len(features), np.float64) if weights is None else \
+        np.asarray(weights, np.float64)
+    mean = features.mean(axis=0)
+    scale = features.std(axis=0) + np.float32(1e-3)
+    standardised = ((features - mean) / scale).astype(np.float64)
+    targets = -np.ones((len(features), len(names)))
+    targets[np.arange(len(features)), index] = 1.0
+    # weighted ridge with an unpenalised bias: centre by the weighted means
+    total = sample.sum()
+    x_mean = (sample[:, None] * standardised).sum(axis=0) / total
+    y_mean = (sample[:, None] * targets).sum(axis=0) / total
+    centred_x = (standardised - x_mean) * np.sqrt(sample)[:, None]
+    centred_y = (targets - y_mean) * np.sqrt(sample)[:, None]
+    count, dimension = centred_x.shape
+    if dimension > count:  # dual form: N x N
+        gram = centred_x @ centred_x.T
+        solution = centred_x.T @ np.linalg.solve(gram + ridge * np.eye(count), centred_y)
+    else:
+        gram = centred_x.T @ centred_x
+        solution = np.linalg.solve(gram + ridge * np.eye(dimension), centred_x.T @ centred_y)
+    bias = y_mean - x_mean @ solution
+    return SecondOpinion(names, mean.astype(np.float32), scale.astype(np.float32),
+                         solution.astype(np.float32), bias.astype(np.float32))

@@ -1,0 +1,105 @@
+"""A trained bank: what training on labelled real crops adds to the rendered filters.
+
+It holds the second opinion (:mod:`.second_opinion`), the rule that decides with it,
+and the mean real examples of each class that join the renderings in the classification
+filters (:mod:`.filter_banks`). It is saved as one file with its provenance
+(:mod:`.bank_file`): data folders, counts per class, parameters, package version.
+
+The package ships one, built by ``speed_sign_train build`` from the project's real data
+(:data:`DEFAULT_BANK_FILE`); ``classifier.bank_file`` names another, or ``none`` for the
+renderings alone.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from speed_sign_detector.errors import BankFileError
+from speed_sign_detector.recognition.bank_file import load_bank_file, save_bank_file
+from speed_sign_detector.recognition.second_opinion import SecondOpinion
+
+__all__ = ['DEFAULT_BANK_FILE', 'NO_BANK_FILE', 'TRAINED_BANK_FORMAT', 'TrainedBank',
+           'load_trained_bank', 'resolve_bank_file', 'save_trained_bank']
+
+TRAINED_BANK_FORMAT = 'speed_sign_detector.trained_bank'
+TRAINED_BANK_VERSION = 1
+#: The bank shipped with the package.
+DEFAULT_BANK_FILE = Path(__file__).resolve().parent / 'data' / 'default_bank.npz'
+#: ``classifier.bank_file`` value for the rendered templates alone (no trained bank).
+NO_BANK_FILE = 'none'
+
+
+@dataclass(frozen=True)
+class TrainedBank:
+    """The trained parts of the classifier.
+
+    Attributes:
+        second_opinion: the linear model, or ``None``.
+        candidates: the second opinion chooses among this many leading correlation labels.
+        min_lead: its least score lead over its next best label.
+        class_examples: label -> (M, P, P) float32 mean real examples (canonical patches
+            of :mod:`.sign_features`) joining that class's composite filters; may be empty.
+        provenance: data folders, counts per class, parameters, package version.
+    """
+
+    second_opinion: SecondOpinion | None
+    candidates: int = 2
+    min_lead: float = 0.2
+    class_examples: dict[str, np.ndarray] = field(default_factory=dict)
+    provenance: dict[str, Any] = field(default_factory=dict)
+
+
+def resolve_bank_file(setting: str) -> Path | None:
+    """The file a ``classifier.bank_file`` value names: ``''`` the shipped default,
+    ``'none'`` no file (renderings only), else the path (``~`` expanded)."""
+    if setting.strip().lower() == NO_BANK_FILE:
+        return None
+    if not setting.strip():
+        return DEFAULT_BANK_FILE
+    return Path(setting).expanduser()
+
+
+def save_trained_bank(path: Path, bank: TrainedBank) -> None:
+    """Write ``bank`` to ``path`` with its provenance (atomically)."""
+    arrays: dict[str, np.ndarray] = {}
+    if bank.second_opinion is not None:
+        opinion = bank.second_opinion
+        arrays.update(opinion_labels=np.asarray(opinion.labels), feature_mean=opinion.feature_mean,
+                      feature_scale=opinion.feature_scale,
+                      weights=opinion.weights.astype(np.float16), bias=opinion.bias)
+    for label, examples in bank.class_examples.items():
+        arrays[f'examples_{label}'] = np.asarray(examples, np.float16)
+    meta = dict(bank.provenance, decision={'candidates': bank.candidates,
+                                           'min_lead': bank.min_lead})
+    save_bank_file(path, arrays, meta, TRAINED_BANK_FORMAT, TRAINED_BANK_VERSION)
+
+
+def load_trained_bank(path: Path) -> TrainedBank:
+    """Read a trained bank.
+
+    Raises:
+        BankFileError: for a missing, corrupt or incompatible file (the reason named).
+    """
+    arrays, meta = load_bank_file(path, TRAINED_BANK_FORMAT, (TRAINED_BANK_VERSION,))
+    try:
+        opinion = None
+        if 'weights' in arrays:
+            opinion = SecondOpinion(tuple(str(n) for n in arrays['opinion_labels']),
+                                    arrays['feature_mean'].astype(np.float32),
+                                    arrays['feature_scale'].astype(np.float32),
+                                    arrays['weights'].astype(np.float32),
+                                    arrays['bias'].astype(np.float32))
+            if opinion.weights.shape != (opinion.feature_mean.size, len(opinion.labels)):
+                raise ValueError(f'weights of shape {opinion.weights.shape} do not fit '
+                                 f'{opinion.feature_mean.size} features and '
+                                 f'{len(opinion.labels)} labels')
+        examples = {name[len('examples_'):]: array.astype(np.float32)
+                    for name, array in arrays.items() if name.startswith('examples_')}
+        decision = meta['decision']
+        return TrainedBank(opinion, int(decision['candidates']), float(decision['min_lead']),
+                           examples, {k: v for k, v in meta.items() if k != 'decision'})
+    except (KeyError, ValueError, TypeError) as err:
+        raise BankFileError(f'{path} is not a complete trained bank ({err})') from err

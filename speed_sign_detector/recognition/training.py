@@ -1,0 +1,455 @@
+"""Training a bank from labelled real crops, and validation that keeps signs apart.
+
+Training (:func:`train_bank`):
+
+1. The rendered-only classifier locates the sign in every crop (centre and radius, as
+   it will at run time) and each sign is resampled to a canonical patch
+   (:mod:`.sign_features`).
+2. Composite filters: the patches of each class are grouped (k-means) into a few mean
+   images, which join that class's renderings in its kth-law MACE filters at every size
+   (:mod:`.filter_banks`). Averaging keeps the filters stable with hundreds of examples.
+3. Second opinion: a ridge model on gradient-orientation and pixel features
+   (:mod:`.second_opinion`), trained on the patches and on degraded copies of each crop
+   (blur, JPEG, contrast loss, down-scaling), so that small, blurred and dim signs are
+   seen in training.
+
+Look-alike classes (round signs that are not limits) train the second opinion's
+``other_sign`` label. Limits with no real examples keep their rendered filters.
+
+Validation (:func:`cross_validate`): k folds by track (a physical sign is never on both
+sides), each fold's bank trained on the other folds, every crop answered by the bank
+that never saw its track; per-class accuracy, wrong-limit and withheld rates, and the
+look-alikes read as a limit, for the rendered-only classifier, the trained filters alone
+and the trained filters with the second opinion, side by side.
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from collections import Counter
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from speed_sign_detector import __version__
+from speed_sign_detector.config import ClassifierConfig
+from speed_sign_detector.errors import TrainingDataError
+from speed_sign_detector.recognition.classifier import (
+    Classifier,
+    CorrelationEvidence,
+)
+from speed_sign_detector.recognition.labelled_crops import (
+    LabelledCrop,
+    read_crop_folder,
+    track_folds,
+)
+from speed_sign_detector.recognition.second_opinion import fit_second_opinion
+from speed_sign_detector.recognition.sign_features import aligned_patches, sign_features
+from speed_sign_detector.recognition.templates import (
+    END_OF_LIMIT_KINDS,
+    LIMIT_VALUES_KMH,
+    LOOKALIKE_KINDS,
+    gray_template,
+)
+from speed_sign_detector.recognition.trained_bank import NO_BANK_FILE, TrainedBank
+
+__all__ = ['LocatedCrops', 'TrainingConfig', 'cross_validate', 'locate_signs', 'train_bank',
+           'train_from_located']
+
+_LOG = logging.getLogger(__name__)
+#: Called with (done, total) as crops are processed.
+ProgressCallback = Callable[[int, int], None]
+
+
+@dataclass(frozen=True)
+class TrainingConfig:
+    """How a bank is trained.
+
+    Attributes:
+        ridge: Tikhonov regularisation of the second opinion (standardised features).
+        candidates: the second opinion chooses among this many leading correlation labels.
+        min_lead: its least score lead over its next best label (else no answer).
+        augmented_copies: degraded copies of each training crop for the second opinion.
+        examples_per_class: mean real images per class joining the composite filters
+            (0 = renderings only; measured worse, see the README).
+        rendered_per_kind: rendered, degraded crops of every sign kind the package draws
+            (all limits, end-of-limit signs, look-alikes) added to the second opinion's
+            training, so that it knows the values with no real examples.
+        second_opinion: train the second opinion at all.
+        seed: seeds the augmentation and the k-means.
+    """
+
+    ridge: float = 30.0
+    candidates: int = 2
+    min_lead: float = 0.2
+    augmented_copies: int = 2
+    examples_per_class: int = 0
+    rendered_per_kind: int = 30
+    second_opinion: bool = True
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class LocatedCrops:
+    """Crops, with where the rendered-only classifier found each sign.
+
+    Attributes:
+        crops: the labelled crops.
+        signs: (N, 3) float64 (x, y, radius) in crop pixels; NaN where none was found.
+        images: the (h, w) uint8 gray crops.
+    """
+
+    crops: tuple[LabelledCrop, ...]
+    signs: np.ndarray
+    images: tuple[np.ndarray, ...]
+
+    def subset(self, mask: np.ndarray) -> LocatedCrops:
+        """The crops where ``mask`` (N,) is true."""
+        indices = np.flatnonzero(mask)
+        return LocatedCrops(tuple(self.crops[i] for i in indices), self.signs[indices],
+                            tuple(self.images[i] for i in indices))
+
+
+def _read_gray(crop: LabelledCrop) -> np.ndarray:
+    image = cv2.imread(str(crop.path), cv2.IMREAD_GRAYSCALE)
+    if image is None or image.size == 0:
+        raise TrainingDataError(f'{crop.path}: missing or not a readable image')
+    return image
+
+
+def read_crops(folders: Sequence[Path]) -> tuple[list[LabelledCrop], list[np.ndarray],
+                                                 list[str]]:
+    """Every crop of ``folders`` (labels.csv format) with its gray image.
+
+    Returns:
+        (crops, images, unreadable): unreadable images are skipped and listed as
+        ``'path: reason'``.
+
+    Raises:
+        TrainingDataError: for a folder without a usable labels.csv, or no readable crop.
+    """
+    crops: list[LabelledCrop] = []
+    images: list[np.ndarray] = []
+    unreadable: list[str] = []
+    for folder in folders:
+        for crop in read_crop_folder(Path(folder)):
+            try:
+                images.append(_read_gray(crop))
+                crops.append(crop)
+            except TrainingDataError as err:
+                unreadable.append(str(err))
+    if not crops:
+        raise TrainingDataError(f'no readable crop in {", ".join(str(f) for f in folders)}')
+    return crops, images, unreadable
+
+
+def locate_signs(classifier: Classifier, crops: Sequence[LabelledCrop],
+                 images: Sequence[np.ndarray], progress: ProgressCallback | None = None
+                 ) -> LocatedCrops:
+    """Where ``classifier`` finds the sign in each crop (:meth:`Classifier.crop_evidence`)."""
+    signs = np.full((len(crops), 3), np.nan)
+    for index, image in enumerate(images):
+        evidence = classifier.crop_evidence(image)
+        if isinstance(evidence, CorrelationEvidence):
+            signs[index] = (evidence.x_px, evidence.y_px, evidence.radius_px)
+        if progress is not None:
+            progress(index + 1, len(images))
+    return LocatedCrops(tuple(crops), signs, tuple(images))
+
+
+def _degraded(image: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """A copy of a crop as a worse camera would see it: blur, JPEG, contrast loss and
+    down-scaling, each drawn at random (same size as the input)."""
+    out = image.astype(np.float32)
+    if rng.random() < 0.6:
+        out = cv2.GaussianBlur(out, (0, 0), float(rng.uniform(0.5, 1.5)))
+    if rng.random() < 0.5:
+        factor = float(rng.uniform(0.45, 0.8))
+        height, width = out.shape
+        small = cv2.resize(out, (max(4, round(width * factor)), max(4, round(height * factor))),
+                           interpolation=cv2.INTER_AREA)
+        out = cv2.resize(small, (width, height), interpolation=cv2.INTER_LINEAR)
+    if rng.random() < 0.6:
+        gain = float(rng.uniform(0.35, 0.8))
+        out = (out - out.mean()) * gain + out.mean() + float(rng.uniform(-30, 30))
+    out = np.clip(out + rng.normal(0.0, float(rng.uniform(0.0, 4.0)), out.shape), 0, 255)
+    out = out.astype(np.uint8)
+    if rng.random() < 0.6:
+        quality = int(rng.integers(15, 60))
+        ok, encoded = cv2.imencode('.jpg', out, [cv2.IMWRITE_JPEG_QUALITY, quality])
+        if ok:
+            out = cv2.imdecode(encoded, cv2.IMREAD_GRAYSCALE)
+    return out
+
+
+def rendered_training_crops(per_kind: int, rng: np.random.Generator
+                            ) -> tuple[list[np.ndarray], list[str]]:
+    """Rendered crops (GTSRB framing) of every limit, end-of-limit sign and look-alike the
+    package draws, seen at random sizes (diameter 16-60 px), angles, backgrounds and
+    degradations; returns (gray crops, labels)."""
+    kinds = ([str(v) for v in LIMIT_VALUES_KMH] + list(END_OF_LIMIT_KINDS)[::3]
+             + list(LOOKALIKE_KINDS))
+    crops: list[np.ndarray] = []
+    labels: list[str] = []
+    for kind in kinds:
+        label = kind if kind.isdigit() else (
+            'end_of_limit' if kind.startswith('end_of_limit') else 'other_sign')
+        for _ in range(per_kind):
+            diameter = float(rng.uniform(16.0, 60.0))
+            margin = max(5.0, 0.1 * diameter)
+            canvas = int(round(diameter + 2 * margin))
+            crop = gray_template(kind, int(round(diameter)), canvas,
+                                 background=float(rng.uniform(40, 200)),
+                                 yaw_deg=float(rng.uniform(-25, 25)),
+                                 pitch_deg=float(rng.uniform(-10, 10)),
+                                 roll_deg=float(rng.uniform(-6, 6)))
+            crops.append(_degraded(crop, rng))
+            labels.append(label)
+    return crops, labels
+
+
+def _jittered(sign: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """(x, y, radius) moved by up to 6% of the radius and scaled by up to +-6%: the
+    run-time location is not exact."""
+    x_px, y_px, radius_px = sign
+    shift = rng.uniform(-0.06, 0.06, 2) * radius_px
+    return np.asarray([x_px + shift[0], y_px + shift[1],
+                       radius_px * float(rng.uniform(0.94, 1.06))])
+
+
+def _class_means(patches: np.ndarray, count: int, rng: np.random.Generator) -> np.ndarray:
+    """``count`` k-means centres of (M, P, P) patches, each normalised to zero mean and
+    unit variance first (so brightness does not decide the groups)."""
+    flat = patches.reshape(len(patches), -1).astype(np.float64)
+    flat = (flat - flat.mean(axis=1, keepdims=True)) / (flat.std(axis=1, keepdims=True) + 1e-6)
+    count = min(count, len(flat))
+    centres = flat[rng.choice(len(flat), count, replace=False)]
+    for _ in range(15):
+        nearest = np.argmin(((flat[:, None, :] - centres[None]) ** 2).sum(-1), axis=1)
+        centres = np.stack([flat[nearest == k].mean(axis=0) if np.any(nearest == k)
+                            else centres[k] for k in range(count)])
+    return centres.reshape((count,) + patches.shape[1:]).astype(np.float32)
+
+
+def train_from_located(located: LocatedCrops, config: TrainingConfig,
+                       provenance: dict[str, Any] | None = None,
+                       rendered: LocatedCrops | None = None) -> TrainedBank:
+    """Train the bank's parts from crops located by the rendered-only classifier
+    (``rendered``: located rendered crops, :func:`rendered_training_crops`, for the second
+    opinion).
+
+    Raises:
+        TrainingDataError: when fewer than two labels have a located crop.
+    """
+    rng = np.random.default_rng(config.seed)
+    found = np.isfinite(located.signs[:, 0])
+    labels = [crop.label for crop in located.crops]
+    patches = np.concatenate([aligned_patches(image, sign[None]) for image, sign, ok in zip(
+        located.images, located.signs, found) if ok]) if found.any() else np.zeros((0, 1, 1))
+    found_labels = [label for label, ok in zip(labels, found) if ok]
+    if len(set(found_labels)) < 2:
+        raise TrainingDataError('training needs located crops of at least two classes; '
+                                f'found {sorted(set(found_labels))}')
+    examples: dict[str, np.ndarray] = {}
+    if config.examples_per_class > 0:
+        for label in sorted(set(found_labels)):
+            if label == 'other_sign':
+                continue
+            members = patches[[i for i, name in enumerate(found_labels) if name == label]]
+            examples[label] = _class_means(members, config.examples_per_class, rng)
+    opinion = None
+    if config.second_opinion:
+        feature_rows = [sign_features(patches)]
+        feature_labels = list(found_labels)
+        for _ in range(config.augmented_copies):
+            degraded = [aligned_patches(_degraded(image, rng), _jittered(sign, rng)[None])
+                        for image, sign, ok in zip(located.images, located.signs, found) if ok]
+            feature_rows.append(sign_features(np.concatenate(degraded)))
+            feature_labels += found_labels
+        if rendered is not None:
+            usable = np.isfinite(rendered.signs[:, 0])
+            feature_rows.append(sign_features(np.concatenate(
+                [aligned_patches(image, sign[None]) for image, sign, ok in zip(
+                    rendered.images, rendered.signs, usable) if ok])))
+            feature_labels += [c.label for c, ok in zip(rendered.crops, usable) if ok]
+        features = np.concatenate(feature_rows)
+        # every label weighs the same in total (rare limits are not drowned)
+        counts = Counter(feature_labels)
+        weights = np.asarray([len(feature_labels) / (len(counts) * counts[label])
+                              for label in feature_labels])
+        opinion = fit_second_opinion(features, feature_labels, config.ridge, weights)
+    counts_by_label = Counter(labels)
+    record = dict(provenance or {})
+    record.update(crops=len(labels), located=int(found.sum()),
+                  counts_per_class=dict(sorted(counts_by_label.items())),
+                  training=dataclasses.asdict(config), package_version=__version__)
+    return TrainedBank(opinion, config.candidates, config.min_lead, examples, record)
+
+
+def _rendered_classifier(config: ClassifierConfig) -> Classifier:
+    return Classifier(dataclasses.replace(config, bank_file=NO_BANK_FILE),
+                      TrainedBank(None))
+
+
+@dataclass(frozen=True)
+class _RenderedCrop:
+    """A rendered training crop's label (stands in for :class:`LabelledCrop`)."""
+
+    label: str
+
+
+def locate_rendered(classifier: Classifier, config: TrainingConfig) -> LocatedCrops | None:
+    """The rendered training crops of ``config``, located by ``classifier``."""
+    if config.rendered_per_kind <= 0 or not config.second_opinion:
+        return None
+    images, labels = rendered_training_crops(config.rendered_per_kind,
+                                             np.random.default_rng(config.seed + 1))
+    return locate_signs(classifier, [_RenderedCrop(label) for label in labels],  # type: ignore[misc]
+                        images)
+
+
+def train_bank(folders: Sequence[Path], classifier_config: ClassifierConfig = ClassifierConfig(),
+               config: TrainingConfig = TrainingConfig(),
+               progress: ProgressCallback | None = None) -> TrainedBank:
+    """Train a bank from labelled crop folders (GTSRB ``labels.csv`` format).
+
+    Raises:
+        TrainingDataError: for unusable folders or too few located crops.
+    """
+    started = time.perf_counter()
+    crops, images, unreadable = read_crops(folders)
+    classifier = _rendered_classifier(classifier_config)
+    located = locate_signs(classifier, crops, images, progress)
+    provenance = {'data_folders': [str(Path(f)) for f in folders],
+                  'unreadable': unreadable,
+                  'classifier': dataclasses.asdict(classifier_config)}
+    bank = train_from_located(located, config, provenance, locate_rendered(classifier, config))
+    _LOG.info('trained on %d crops in %.1f s', len(crops), time.perf_counter() - started)
+    return bank
+
+
+#: The variants :func:`cross_validate` compares.
+VARIANTS: tuple[str, ...] = ('rendered', 'trained_filters', 'trained_filters_second_opinion')
+
+
+def answer_is_limit(label: str) -> bool:
+    """True when an answer names a speed limit."""
+    return label.isdigit()
+
+
+def summarise(truths: Sequence[str], answers: Sequence[str], class_ids: Sequence[int],
+              widths_px: Sequence[int]) -> dict[str, Any]:
+    """Accuracy, wrong-limit and withheld rates per class, and look-alikes read as limit.
+
+    A limit crop is right when answered its value; an end-of-limit crop when the answer
+    is not a limit; a look-alike when the answer is not a limit. A wrong limit is a limit
+    answer other than the truth.
+    """
+    per_class: dict[str, dict[str, Any]] = {}
+    for truth in sorted(set(truths) - {'other_sign'}, key=lambda t: (not t.isdigit(), t.zfill(3))):
+        picked = [a for t, a in zip(truths, answers) if t == truth]
+        if truth.isdigit():
+            right = sum(a == truth for a in picked)
+        else:
+            right = sum(not answer_is_limit(a) for a in picked)
+        wrong = sum(answer_is_limit(a) and a != truth for a in picked)
+        withheld = sum(a == 'no_sign' for a in picked)
+        per_class[truth] = {'crops': len(picked), 'accuracy': right / len(picked),
+                            'wrong_limit_rate': wrong / len(picked),
+                            'withheld_rate': withheld / len(picked),
+                            'answers': dict(Counter(picked).most_common())}
+    limit_rows = [(t, a) for t, a in zip(truths, answers) if t != 'other_sign']
+    right_all = sum((a == t) if t.isdigit() else not answer_is_limit(a) for t, a in limit_rows)
+    wrong_all = sum(answer_is_limit(a) and a != t for t, a in limit_rows)
+    small = [(t, a) for (t, a), w in zip(zip(truths, answers), widths_px)
+             if t != 'other_sign' and w < 20]
+    lookalike: dict[str, dict[str, Any]] = {}
+    for class_id in sorted({c for c, t in zip(class_ids, truths) if t == 'other_sign'}):
+        picked = [a for c, a in zip(class_ids, answers) if c == class_id]
+        lookalike[str(class_id)] = {'crops': len(picked), 'read_as_limit_rate': sum(
+            answer_is_limit(a) for a in picked) / len(picked)}
+    lookalike_answers = [a for t, a in zip(truths, answers) if t == 'other_sign']
+    return {
+        'crops': len(limit_rows),
+        'accuracy': right_all / max(1, len(limit_rows)),
+        'wrong_limit_rate': wrong_all / max(1, len(limit_rows)),
+        'accuracy_under_20px': (sum((a == t) if t.isdigit() else not answer_is_limit(a)
+                                    for t, a in small) / len(small)) if small else None,
+        'crops_under_20px': len(small),
+        'per_class': per_class,
+        'lookalikes': len(lookalike_answers),
+        'lookalikes_read_as_limit_rate': (sum(answer_is_limit(a) for a in lookalike_answers)
+                                          / len(lookalike_answers)) if lookalike_answers
+        else None,
+        'lookalike_classes': lookalike,
+    }
+
+
+def cross_validate(folders: Sequence[Path], folds: int = 5,
+                   classifier_config: ClassifierConfig = ClassifierConfig(),
+                   config: TrainingConfig = TrainingConfig(),
+                   progress: ProgressCallback | None = None) -> dict[str, Any]:
+    """k-fold validation split by track (see the module docstring).
+
+    Returns:
+        ``{'folds': k, 'variants': {variant: summary over all crops}, 'fold_accuracy':
+        {variant: [per-fold accuracy]}, 'accuracy_mean'/'accuracy_std': {variant: ...}}``.
+
+    Raises:
+        TrainingDataError: for unusable folders.
+    """
+    crops, images, unreadable = read_crops(folders)
+    fold_of = track_folds(crops, folds, config.seed)
+    total_steps = len(crops) * (1 + folds)
+    done = 0
+
+    def step(_: int, __: int) -> None:
+        nonlocal done
+        done += 1
+        if progress is not None:
+            progress(done, total_steps)
+
+    rendered = _rendered_classifier(classifier_config)
+    located = locate_signs(rendered, crops, images, step)
+    rendered_crops = locate_rendered(rendered, config)
+    answers: dict[str, list[str]] = {variant: [''] * len(crops) for variant in VARIANTS}
+    for index, image in enumerate(images):
+        answers['rendered'][index] = rendered.classify_crop(image).label
+    for fold in range(folds):
+        train = fold_of != fold
+        bank = train_from_located(located.subset(train), config, rendered=rendered_crops)
+        trained = Classifier(classifier_config, bank)
+        for index in np.flatnonzero(~train):
+            evidence = trained.crop_evidence(images[index])
+            answers['trained_filters'][index] = trained.decide(
+                images[index], evidence, use_second_opinion=False).label
+            answers['trained_filters_second_opinion'][index] = trained.decide(
+                images[index], evidence).label
+            step(0, 0)
+        done += int(train.sum())  # the steps of this fold's training crops
+    truths = [crop.label for crop in crops]
+    class_ids = [crop.class_id for crop in crops]
+    widths = [crop.roi[2] - crop.roi[0] + 1 for crop in crops]
+    report: dict[str, Any] = {'folds': folds, 'crops': len(crops), 'unreadable': unreadable,
+                              'data_folders': [str(f) for f in folders],
+                              'training': dataclasses.asdict(config), 'variants': {},
+                              'fold_accuracy': {}, 'accuracy_mean': {}, 'accuracy_std': {}}
+    for variant in VARIANTS:
+        report['variants'][variant] = summarise(truths, answers[variant], class_ids, widths)
+        per_fold = []
+        for fold in range(folds):
+            members = [i for i in range(len(crops)) if fold_of[i] == fold]
+            per_fold.append(summarise([truths[i] for i in members],
+                                      [answers[variant][i] for i in members],
+                                      [class_ids[i] for i in members],
+                                      [widths[i] for i in members])['accuracy'])
+        report['fold_accuracy'][variant] = per_fold
+        report['accuracy_mean'][variant] = float(np.mean(per_fold))
+        report['accuracy_std'][variant] = float(np.std(per_fold))
+    return report
+

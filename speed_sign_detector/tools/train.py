@@ -1,0 +1,192 @@
+"""``speed_sign_train``: build a filter bank from labelled crops, or validate the recipe.
+
+- ``build OUT.npz DIR [DIR ...]``: train on every crop of the folders (GTSRB
+  ``labels.csv`` format; classes 0-8 are limits and end of 80, the look-alike classes
+  9, 10, 15-17, 32-42 are negatives) and write one bank file with its provenance. Load it
+  with the parameter ``classifier.bank_file``.
+- ``validate DIR [DIR ...]``: k-fold validation split by track (a physical sign is never
+  on both sides): per-class accuracy, wrong-limit and withheld rates, look-alikes read
+  as a limit, for the rendered-only classifier, the trained filters, and the trained
+  filters with the second opinion, side by side.
+
+With ``--json`` the last line on stdout is ONE JSON object; progress goes to stderr.
+Exit status: 0 on success, 1 when training failed (the reason on stderr), 2 for bad
+usage, 130 when interrupted.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from pathlib import Path
+from typing import Any
+
+from speed_sign_detector import __version__
+from speed_sign_detector.config import ClassifierConfig, load_yaml
+from speed_sign_detector.errors import SpeedSignError
+from speed_sign_detector.recognition.trained_bank import save_trained_bank
+from speed_sign_detector.recognition.training import (
+    VARIANTS,
+    TrainingConfig,
+    cross_validate,
+    train_bank,
+)
+from speed_sign_detector.tools.progress import progress_bar
+
+_DEFAULTS = TrainingConfig()
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``speed_sign_train``."""
+    parser = argparse.ArgumentParser(
+        prog='speed_sign_train', description='Train the classifier\'s filter bank on labelled '
+        'real crops (GTSRB labels.csv format), or validate training by k-fold split by track.',
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser.add_argument('--version', action='version', version=f'%(prog)s {__version__}')
+    subparsers = parser.add_subparsers(dest='command', required=True)
+    common = argparse.ArgumentParser(add_help=False,
+                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    common.add_argument('--config', type=Path, help='YAML parameter file (the node\'s format); '
+                        'its classifier settings shape the filters')
+    common.add_argument('--ridge', type=float, default=_DEFAULTS.ridge,
+                        help='regularisation of the second opinion')
+    common.add_argument('--candidates', type=int, default=_DEFAULTS.candidates,
+                        help='the second opinion chooses among this many leading labels of '
+                        'the correlation filters')
+    common.add_argument('--min-lead', type=float, default=_DEFAULTS.min_lead,
+                        help='least lead of the second opinion\'s answer over its next best '
+                        'label; less withholds the answer')
+    common.add_argument('--augmented-copies', type=int, default=_DEFAULTS.augmented_copies,
+                        help='degraded copies (blur, JPEG, contrast, scale) of each crop')
+    common.add_argument('--examples-per-class', type=int,
+                        default=_DEFAULTS.examples_per_class,
+                        help='mean real images per class in the composite filters (0: none)')
+    common.add_argument('--rendered-per-kind', type=int, default=_DEFAULTS.rendered_per_kind,
+                        help='rendered, degraded crops of every sign kind the package draws '
+                        'added to the second opinion\'s training (values without real '
+                        'examples: 5, 10, 40, 90, 110, 130 km/h)')
+    common.add_argument('--no-second-opinion', action='store_true',
+                        help='train the composite filters only')
+    common.add_argument('--seed', type=int, default=_DEFAULTS.seed)
+    common.add_argument('--json', action='store_true',
+                        help='print one JSON object as the last line of stdout')
+    common.add_argument('-q', '--quiet', action='store_true', help='no progress bar')
+
+    build = subparsers.add_parser('build', parents=[common], help='train a bank file',
+                                  formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    build.add_argument('out', type=Path, help='the bank file to write (.npz)')
+    build.add_argument('folders', type=Path, nargs='+', help='labelled crop folders')
+    build.set_defaults(run=_run_build)
+
+    validate = subparsers.add_parser('validate', parents=[common],
+                                     help='k-fold validation split by track',
+                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    validate.add_argument('folders', type=Path, nargs='+', help='labelled crop folders')
+    validate.add_argument('--folds', type=int, default=5, help='number of folds (>= 2)')
+    validate.set_defaults(run=_run_validate)
+    return parser
+
+
+def _configs(args: argparse.Namespace) -> tuple[ClassifierConfig, TrainingConfig]:
+    classifier = load_yaml(args.config).classifier if args.config else ClassifierConfig()
+    training = TrainingConfig(ridge=args.ridge, candidates=args.candidates,
+                              min_lead=args.min_lead, augmented_copies=args.augmented_copies,
+                              examples_per_class=args.examples_per_class,
+                              rendered_per_kind=args.rendered_per_kind,
+                              second_opinion=not args.no_second_opinion, seed=args.seed)
+    return classifier, training
+
+
+def _bar(args: argparse.Namespace, description: str) -> Any:
+    bar = progress_bar(None, description, 'crop', enabled=not args.quiet)
+
+    def update(done: int, total: int) -> None:
+        bar.total = total
+        bar.update(done - bar.n)
+    update.close = bar.close  # type: ignore[attr-defined]
+    return update
+
+
+def _run_build(args: argparse.Namespace) -> int:
+    classifier_config, training = _configs(args)
+    progress = _bar(args, 'locating signs')
+    try:
+        bank = train_bank(args.folders, classifier_config, training, progress)
+    finally:
+        progress.close()
+    try:
+        save_trained_bank(args.out, bank)
+    except OSError as err:
+        raise SpeedSignError(f'cannot write {args.out}: {err}') from err
+    size = args.out.stat().st_size
+    record = bank.provenance
+    summary = {'bank_file': str(args.out), 'bytes': size, 'crops': record['crops'],
+               'located': record['located'], 'counts_per_class': record['counts_per_class'],
+               'unreadable': record['unreadable']}
+    print(f'wrote {args.out} ({size / 1e6:.2f} MB) from {record["crops"]} crops '
+          f'({record["located"]} located): ' + ', '.join(
+              f'{label} {count}' for label, count in record['counts_per_class'].items()))
+    for line in record['unreadable']:
+        print(f'skipped unreadable crop: {line}')
+    if args.json:
+        print(json.dumps(summary, sort_keys=True))
+    return 1 if record['unreadable'] else 0
+
+
+def _percent(value: float | None) -> str:
+    return '-' if value is None else f'{100.0 * value:5.1f}%'
+
+
+def _run_validate(args: argparse.Namespace) -> int:
+    if args.folds < 2:
+        print('speed_sign_train validate: error: --folds must be >= 2', file=sys.stderr)
+        return 2
+    classifier_config, training = _configs(args)
+    progress = _bar(args, 'validating')
+    try:
+        report = cross_validate(args.folders, args.folds, classifier_config, training, progress)
+    finally:
+        progress.close()
+    print(f'{args.folds}-fold validation split by track, {report["crops"]} crops')
+    header = f'{"class":>13} ' + ' '.join(f'{v[:22]:>30}' for v in VARIANTS)
+    print(header)
+    print(f'{"":>13} ' + ' '.join(f'{"right / wrong limit / none":>30}' for _ in VARIANTS))
+    classes = list(report['variants'][VARIANTS[0]]['per_class'])
+    for name in classes:
+        cells = []
+        for variant in VARIANTS:
+            row = report['variants'][variant]['per_class'][name]
+            cells.append(f'{_percent(row["accuracy"])} / {_percent(row["wrong_limit_rate"])}'
+                         f' / {_percent(row["withheld_rate"])}')
+        print(f'{name:>13} ' + ' '.join(f'{cell:>30}' for cell in cells))
+    for key, title in (('accuracy', 'all limits'), ('wrong_limit_rate', 'wrong limit'),
+                       ('accuracy_under_20px', 'under 20 px'),
+                       ('lookalikes_read_as_limit_rate', 'look-alikes as limit')):
+        print(f'{title:>20} ' + ' '.join(
+            f'{_percent(report["variants"][v][key]):>30}' for v in VARIANTS))
+    print(f'{"fold accuracy":>20} ' + ' '.join(
+        f'{report["accuracy_mean"][v]:>21.4f} +- {report["accuracy_std"][v]:.4f}'
+        for v in VARIANTS))
+    if args.json:
+        print(json.dumps(report, sort_keys=True))
+    return 1 if report['unreadable'] else 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run ``speed_sign_train``; returns the process exit status."""
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format='%(levelname)s %(name)s: %(message)s',
+                        stream=sys.stderr)
+    try:
+        return int(args.run(args))
+    except SpeedSignError as err:
+        print(f'speed_sign_train {args.command}: error: {err}', file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f'speed_sign_train {args.command}: interrupted', file=sys.stderr)
+        return 130
+
+
+if __name__ == '__main__':
+    sys.exit(main())

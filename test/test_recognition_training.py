@@ -1,0 +1,258 @@
+"""Training a bank from labelled crops, the bank file, crop framing, the cache, the CLI.
+
+The crop folders are generated here (rendered signs on textured backgrounds, GTSRB
+file names and labels.csv), so the answers are known and no real data is needed.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from scene_helpers import textured_background
+
+from speed_sign_detector.config import ClassifierConfig
+from speed_sign_detector.errors import BankFileError, TrainingDataError
+from speed_sign_detector.recognition.bank_file import load_bank_file, save_bank_file
+from speed_sign_detector.recognition.classifier import Classifier, crop_sign_radius
+from speed_sign_detector.recognition.filter_banks import bank_radii, build_banks
+from speed_sign_detector.recognition.labelled_crops import read_crop_folder, track_folds
+from speed_sign_detector.recognition.templates import LIMIT_VALUES_KMH, render_sign
+from speed_sign_detector.recognition.trained_bank import (
+    TRAINED_BANK_FORMAT,
+    TrainedBank,
+    load_trained_bank,
+    save_trained_bank,
+)
+from speed_sign_detector.recognition.training import (
+    TrainingConfig,
+    cross_validate,
+    train_bank,
+)
+
+#: Small banks (radius 16-24 px) keep the module fast.
+SMALL = ClassifierConfig(max_radius_px=24.0, cache_dir='', bank_file='none')
+#: GTSRB class id -> rendered kind.
+KINDS = {1: '30', 2: '50', 5: '80', 17: 'no_entry'}
+TRAINING = TrainingConfig(augmented_copies=1, examples_per_class=2, rendered_per_kind=3)
+
+
+def crop_of(kind: str, sign_px: int, margin_px: int, seed: int, blur_px: float = 0.0
+            ) -> np.ndarray:
+    """A gray crop: one rendered sign ``sign_px`` wide with ``margin_px`` around it."""
+    side = sign_px + 2 * margin_px
+    background = cv2.cvtColor(textured_background(seed, side, side), cv2.COLOR_BGR2GRAY)
+    bgr, alpha = render_sign(kind, sign_px)
+    sign = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype(np.float32)
+    frame = background.astype(np.float32)
+    window = frame[margin_px:margin_px + sign_px, margin_px:margin_px + sign_px]
+    window[:] = sign + (1.0 - alpha) * window
+    if blur_px:
+        frame = cv2.GaussianBlur(frame, (0, 0), blur_px)
+    return np.clip(frame, 0, 255).astype(np.uint8)
+
+
+def write_crop_folder(folder: Path, tracks_per_class: int = 3, per_track: int = 3,
+                      seed: int = 0) -> Path:
+    """A GTSRB-format folder: CLASS/TRACK_INDEX.png and labels.csv (10% margin)."""
+    rows = ['Filename;Width;Height;Roi.X1;Roi.Y1;Roi.X2;Roi.Y2;ClassId']
+    for class_id, kind in KINDS.items():
+        for track in range(tracks_per_class):
+            for index in range(per_track):
+                sign = 30 + 4 * index + 2 * track
+                margin = max(5, sign // 10)
+                crop = crop_of(kind, sign, margin, seed + 97 * class_id + 13 * track + index,
+                               blur_px=0.4 * (index % 2))
+                name = f'{class_id:05d}/{track:05d}_{index:05d}.png'
+                (folder / f'{class_id:05d}').mkdir(parents=True, exist_ok=True)
+                cv2.imwrite(str(folder / name), crop)
+                side = crop.shape[0]
+                rows.append(f'{name};{side};{side};{margin};{margin};{margin + sign - 1};'
+                            f'{margin + sign - 1};{class_id}')
+    (folder / 'labels.csv').write_text('\n'.join(rows) + '\n')
+    return folder
+
+
+@pytest.fixture(scope='module')
+def crop_folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return write_crop_folder(tmp_path_factory.mktemp('crops'))
+
+
+@pytest.fixture(scope='module')
+def trained(crop_folder: Path) -> TrainedBank:
+    return train_bank([crop_folder], SMALL, TRAINING)
+
+
+def test_training_gives_a_bank_that_reads_those_signs(trained: TrainedBank) -> None:
+    classifier = Classifier(SMALL, trained)
+    for class_id, kind in KINDS.items():
+        crop = crop_of(kind, 34, 5, seed=1000 + class_id)  # not a training crop
+        answer = classifier.classify_crop(crop).label
+        assert answer == (kind if kind.isdigit() else answer), (kind, answer)
+        if not kind.isdigit():
+            assert not answer.isdigit(), f'look-alike {kind} read as {answer}'
+    assert trained.second_opinion is not None
+    # the real classes, and from the renderings every limit the package draws
+    assert {'30', '50', '80', 'other_sign', 'end_of_limit'} <= set(trained.second_opinion.labels)
+    assert {str(v) for v in LIMIT_VALUES_KMH} <= set(trained.second_opinion.labels)
+    assert set(trained.class_examples) == {'30', '50', '80'}
+    assert trained.provenance['counts_per_class'] == {'30': 9, '50': 9, '80': 9,
+                                                      'other_sign': 9}
+
+
+def test_bank_file_round_trips(tmp_path: Path, trained: TrainedBank) -> None:
+    path = tmp_path / 'bank.npz'
+    save_trained_bank(path, trained)
+    loaded = load_trained_bank(path)
+    assert loaded.second_opinion is not None and trained.second_opinion is not None
+    assert loaded.second_opinion.labels == trained.second_opinion.labels
+    np.testing.assert_allclose(loaded.second_opinion.weights, trained.second_opinion.weights,
+                               rtol=2e-3, atol=1e-4)  # weights stored as float16
+    assert loaded.candidates == trained.candidates and loaded.min_lead == trained.min_lead
+    assert loaded.provenance['counts_per_class'] == trained.provenance['counts_per_class']
+    assert loaded.provenance['package_version']
+    crop = crop_of('50', 36, 5, seed=77)
+    config = dataclasses.replace(SMALL, bank_file=str(path))
+    assert Classifier(config).classify_crop(crop).label == '50'
+
+
+def _flip_byte(path: Path, offset: int) -> None:
+    data = bytearray(path.read_bytes())
+    data[offset] ^= 0xFF
+    path.write_bytes(bytes(data))
+
+
+@pytest.mark.parametrize('damage', ['truncated', 'empty', 'byte flipped', 'missing'])
+def test_corrupt_bank_file_is_a_clear_error(tmp_path: Path, trained: TrainedBank,
+                                            damage: str) -> None:
+    path = tmp_path / 'bank.npz'
+    save_trained_bank(path, trained)
+    size = path.stat().st_size
+    if damage == 'truncated':
+        path.write_bytes(path.read_bytes()[:size // 2])
+    elif damage == 'empty':
+        path.write_bytes(b'')
+    elif damage == 'byte flipped':
+        _flip_byte(path, size // 3)
+    else:
+        path.unlink()
+    with pytest.raises(BankFileError, match=str(path.name)):
+        load_trained_bank(path)
+    with pytest.raises(BankFileError):
+        Classifier(dataclasses.replace(SMALL, bank_file=str(path)))
+
+
+def test_bank_of_another_version_or_format_is_refused(tmp_path: Path) -> None:
+    path = tmp_path / 'bank.npz'
+    save_bank_file(path, {'x': np.zeros(3)}, {}, TRAINED_BANK_FORMAT, 2)
+    with pytest.raises(BankFileError, match='version 2.*reads version'):
+        load_trained_bank(path)
+    save_bank_file(path, {'x': np.zeros(3)}, {}, 'something.else', 1)
+    with pytest.raises(BankFileError, match="'something.else'"):
+        load_trained_bank(path)
+    with pytest.raises(ValueError, match='object'):
+        save_bank_file(path, {'x': np.asarray([{}], dtype=object)}, {}, 'f', 1)
+    arrays, meta = load_bank_file(path, 'something.else', (1,))  # the refused save left it
+    assert meta['format_version'] == 1 and set(arrays) == {'x'}
+
+
+@pytest.mark.parametrize('damage', ['truncated', 'empty', 'byte flipped'])
+def test_corrupt_filter_bank_cache_is_rebuilt(tmp_path: Path, damage: str) -> None:
+    config = dataclasses.replace(SMALL, max_radius_px=17.0, cache_dir=str(tmp_path))
+    first = build_banks(config)
+    (cache,) = tmp_path.glob('filter_banks_*.npz')
+    size = cache.stat().st_size
+    if damage == 'truncated':
+        cache.write_bytes(cache.read_bytes()[:size // 2])
+    elif damage == 'empty':
+        cache.write_bytes(b'')
+    else:
+        _flip_byte(cache, size // 2)
+    rebuilt = build_banks(config)
+    assert len(rebuilt) == len(bank_radii(config))
+    np.testing.assert_array_equal(rebuilt[0].classification, first[0].classification)
+    load_bank_file(cache, 'speed_sign_detector.filter_bank_cache', (6,))  # rewritten whole
+
+
+@pytest.mark.parametrize('framing', ['auto', 'margin', 'tight'])
+def test_tight_and_margin_crops(trained: TrainedBank, framing: str) -> None:
+    classifier = Classifier(SMALL, trained)
+    margin_crop = crop_of('80', 36, 6, seed=5)
+    tight_crop = np.ascontiguousarray(margin_crop[6:-6, 6:-6])
+    for crop, kind in ((margin_crop, 'margin'), (tight_crop, 'tight')):
+        answer = classifier.classify_crop(crop, framing)
+        if framing in ('auto', kind):
+            assert answer.label == '80', (framing, kind, answer)
+            assert abs(answer.radius_px - 18.0) < 3.0
+    assert crop_sign_radius((48, 48), 'tight') == 24.0
+    assert crop_sign_radius((48, 48), 'margin') == 19.0
+    with pytest.raises(ValueError, match='unknown crop framing'):
+        classifier.classify_crop(tight_crop, 'loose')
+
+
+def test_folds_never_split_a_track(crop_folder: Path) -> None:
+    crops = read_crop_folder(crop_folder)
+    folds = track_folds(crops, 3)
+    for track in {crop.track for crop in crops}:
+        assert len({int(f) for c, f in zip(crops, folds) if c.track == track}) == 1
+    assert set(folds.tolist()) == {0, 1, 2}
+
+
+def test_cross_validation_reports_every_variant(crop_folder: Path) -> None:
+    report = cross_validate([crop_folder], 3, SMALL, TRAINING)
+    assert report['crops'] == 36 and report['folds'] == 3
+    for variant, summary in report['variants'].items():
+        assert set(summary['per_class']) == {'30', '50', '80'}, variant
+        assert summary['lookalikes'] == 9
+        assert 0.0 <= summary['accuracy'] <= 1.0
+        assert len(report['fold_accuracy'][variant]) == 3
+    assert report['variants']['trained_filters_second_opinion']['accuracy'] >= 0.8
+
+
+def test_empty_or_unlabelled_folders_are_clear_errors(tmp_path: Path) -> None:
+    (tmp_path / 'labels.csv').write_text('')
+    with pytest.raises(TrainingDataError, match='is empty'):
+        train_bank([tmp_path], SMALL, TRAINING)
+    with pytest.raises(TrainingDataError, match='cannot read'):
+        train_bank([tmp_path / 'nowhere'], SMALL, TRAINING)
+
+
+def _train_command() -> list[str]:
+    script = Path(sys.executable).with_name('speed_sign_train')
+    if script.exists():
+        return [str(script)]
+    return [sys.executable, '-c', 'import sys; from speed_sign_detector.tools.train import '
+            'main; sys.exit(main())']
+
+
+def test_train_command_builds_a_bank_and_reports_bad_input(tmp_path: Path,
+                                                           crop_folder: Path) -> None:
+    out = tmp_path / 'my_bank.npz'
+    config = tmp_path / 'params.yaml'
+    config.write_text('speed_sign_detector:\n  ros__parameters:\n    classifier:\n'
+                      '      max_radius_px: 24\n      cache_dir: ""\n')
+    env = dict(os.environ, PYTHONWARNINGS='ignore')
+    done = subprocess.run(_train_command() + [
+        'build', str(out), str(crop_folder), '--config', str(config), '--augmented-copies', '0',
+        '--examples-per-class', '1', '--rendered-per-kind', '1', '--json', '-q'],
+        capture_output=True, text=True, timeout=300, env=env)
+    assert done.returncode == 0, done.stderr
+    summary = json.loads(done.stdout.strip().splitlines()[-1])
+    assert summary['crops'] == 36 and out.is_file() and summary['bytes'] == out.stat().st_size
+    provenance = load_trained_bank(out).provenance
+    assert provenance['data_folders'] == [str(crop_folder)]
+    assert provenance['classifier']['max_radius_px'] == 24.0
+    empty = tmp_path / 'empty'
+    empty.mkdir()
+    (empty / 'labels.csv').write_text('')
+    failed = subprocess.run(_train_command() + ['build', str(tmp_path / 'x.npz'), str(empty)],
+                            capture_output=True, text=True, timeout=300, env=env)
+    assert failed.returncode == 1
+    assert 'is empty' in failed.stderr and 'Traceback' not in failed.stderr
+    assert not (tmp_path / 'x.npz').exists()
