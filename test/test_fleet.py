@@ -320,3 +320,24 @@ def test_interrupted_run_resumes_where_it_stopped(
     for name, mtime_ns in done_before.items():   # not evaluated again
         assert (summaries / name).stat().st_mtime_ns == mtime_ns
     assert len(list(summaries.iterdir())) == 3
+
+
+def test_fleet_benchmark_measures_both_worker_counts(
+        ray_cluster: Any, bank_config: Path, tmp_path: Path) -> None:
+    """bench/bench_fleet.py on two tiny drives (a smoke test: no figure is asserted)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'bench'))
+    try:
+        import bench_fleet
+    finally:
+        sys.path.pop(0)
+    results = bench_fleet.measure(bench_fleet.FleetBenchSettings(
+        out_dir=tmp_path, bags=2, seconds=0.4, width_px=320, height_px=240,
+        worker_counts=(1, 2), project_machines=4, params_file=bank_config))
+    assert [run['workers'] for run in results['runs']] == [1, 2]
+    frames_per_bag = DriveConfig(duration_s=0.4, fps=bench_fleet.DRIVE_FPS).frame_count
+    assert all(run['bags'] == 2 and run['frames'] == 2 * frames_per_bag
+               for run in results['runs'])
+    assert results['runs'][0]['scaling'] == 1.0
+    assert results['projection']['projected_not_measured'] is True
+    assert results['projection']['workers'] == 4 * 2
+    assert 'PROJECTED' in bench_fleet.format_table(results)
