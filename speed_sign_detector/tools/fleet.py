@@ -175,8 +175,13 @@ class _RayEngine:
                     ray.init(include_dashboard=False, log_to_driver=self.options.verbose,
                              object_store_memory=LOCAL_OBJECT_STORE_BYTES)
             except (ConnectionError, RuntimeError, ValueError) as err:
+                hint = ('; if the cluster uses token authentication (Ray >= 2.59 starts it '
+                        'so), set RAY_AUTH_MODE=token and its token (ray get-auth-token)'
+                        if address is not None and not os.environ.get('RAY_AUTH_MODE')
+                        else '')
                 raise FleetError(f'cannot start or join Ray'
-                                 f'{f" at {address}" if address else ""}: {err}') from err
+                                 f'{f" at {address}" if address else ""}: '
+                                 f'{_first_line(err)}{hint}') from err
             self.started_here = True
         self.started_unix_s = time.time()
         return self
