@@ -187,7 +187,7 @@ def format_table(results: dict[str, Any]) -> str:
              f'{"bags/h":>7} {"scaling":>7}  per-worker fps (pipeline start-up s)']
     for run in results['runs']:
         per_worker = ', '.join(f'{fps:.1f} ({setup:.1f})' for fps, setup in
-                               zip(run['worker_fps'], run['worker_setup_s']))
+                               zip(run['worker_fps'], run['worker_setup_s'], strict=True))
         lines.append(f'{run["workers"]:>7} {run["bags"]:>5} {run["frames"]:>7} '
                      f'{run["wall_s"]:7.1f} {run["fps"]:6.1f} {run["bags_per_hour"]:7.0f} '
                      f'{run["scaling"]:7.2f}  {per_worker}')

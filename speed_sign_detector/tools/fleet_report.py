@@ -259,7 +259,7 @@ def write_summary_png(report: FleetReport, path: Path, scratch: Path) -> None:
             bags_axes.bar([p - 0.2 for p in positions],
                           [math.nan if recall is None else recall for recall in recalls],
                           width=0.4, color='tab:green', label='recall')
-            for position, recall in zip(positions, recalls):
+            for position, recall in zip(positions, recalls, strict=True):
                 if recall is None:   # no speed-limit sign in this bag's truth
                     bags_axes.text(position - 0.2, 0.02, 'no sign', rotation=90,
                                    ha='center', va='bottom', fontsize=7, color='gray')
@@ -292,8 +292,8 @@ def write_summary_png(report: FleetReport, path: Path, scratch: Path) -> None:
             points.append((at_s, points[-1][1] + outcome.frames))
             total.append((at_s, total[-1][1] + outcome.frames))
         for worker, points in sorted(by_worker.items()):
-            time_axes.step(*zip(*points), where='post', label=worker)
-        time_axes.step(*zip(*total), where='post', color='black', linewidth=2,
+            time_axes.step(*zip(*points, strict=True), where='post', label=worker)
+        time_axes.step(*zip(*total, strict=True), where='post', color='black', linewidth=2,
                        label=f'all: {report.fps:.1f} fps')
         time_axes.set_xlabel('seconds since the run started (wall clock)')
         time_axes.set_ylabel('frames evaluated')
