@@ -118,7 +118,7 @@ def measure(settings: FleetBenchSettings) -> dict[str, Any]:
     ray_start_s = 0.0
     if started_here:
         started = time.perf_counter()
-        ray.init(num_cpus=settings.cpus, object_store_memory=OBJECT_STORE_BYTES,
+        ray.init(address='local', num_cpus=settings.cpus, object_store_memory=OBJECT_STORE_BYTES,
                  include_dashboard=False, log_to_driver=False)
         ray_start_s = time.perf_counter() - started
     runs = []

@@ -51,8 +51,9 @@ RAY_OBJECT_STORE_BYTES = 80 * 1024 * 1024
 @pytest.fixture(scope='module')
 def ray_cluster() -> Any:
     """One local Ray for the module's tests, as Ray's own tests do."""
-    ray.init(num_cpus=2, object_store_memory=RAY_OBJECT_STORE_BYTES, include_dashboard=False,
-             log_to_driver=False)
+    # address='local': a new instance even where /tmp/ray names one running on this machine
+    ray.init(address='local', num_cpus=2, object_store_memory=RAY_OBJECT_STORE_BYTES,
+             include_dashboard=False, log_to_driver=False)
     yield ray
     ray.shutdown()
 
@@ -322,22 +323,26 @@ def test_interrupted_run_resumes_where_it_stopped(
     assert len(list(summaries.iterdir())) == 3
 
 
-def test_fleet_benchmark_measures_both_worker_counts(
-        ray_cluster: Any, bank_config: Path, tmp_path: Path) -> None:
-    """bench/bench_fleet.py on two tiny drives (a smoke test: no figure is asserted)."""
+
+def test_fleet_benchmark_projection_is_marked_and_follows_its_rule() -> None:
+    """bench/bench_fleet.py's projection and table (its runs are run_fleet, tested above)."""
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'bench'))
     try:
         import bench_fleet
     finally:
         sys.path.pop(0)
-    results = bench_fleet.measure(bench_fleet.FleetBenchSettings(
-        out_dir=tmp_path, bags=2, seconds=0.4, width_px=320, height_px=240,
-        worker_counts=(1, 2), project_machines=4, params_file=bank_config))
-    assert [run['workers'] for run in results['runs']] == [1, 2]
-    frames_per_bag = DriveConfig(duration_s=0.4, fps=bench_fleet.DRIVE_FPS).frame_count
-    assert all(run['bags'] == 2 and run['frames'] == 2 * frames_per_bag
-               for run in results['runs'])
-    assert results['runs'][0]['scaling'] == 1.0
-    assert results['projection']['projected_not_measured'] is True
-    assert results['projection']['workers'] == 4 * 2
-    assert 'PROJECTED' in bench_fleet.format_table(results)
+    runs = [{'workers': 1, 'bags': 6, 'frames': 540, 'wall_s': 90.0, 'fps': 6.0,
+             'bags_per_hour': 240.0, 'worker_fps': [6.0], 'worker_setup_s': [0.5],
+             'scaling': 1.0},
+            {'workers': 2, 'bags': 6, 'frames': 540, 'wall_s': 50.0, 'fps': 10.8,
+             'bags_per_hour': 432.0, 'worker_fps': [5.0, 6.0], 'worker_setup_s': [0.4, 0.6],
+             'scaling': 1.8}]
+    projection = bench_fleet.project(runs[1], frames_per_bag=90.0, bags=6, machines=4)
+    assert projection['projected_not_measured'] is True and projection['workers'] == 8
+    assert projection['fps'] == pytest.approx(4 * 10.8)
+    assert projection['bags_per_hour'] == pytest.approx(4 * 10.8 * 3600 / 90)
+    # 6 bags on 8 workers: one round of a 90-frame bag at the median 5.5 fps, after start-up
+    assert projection['wall_s_for_bench_bags'] == pytest.approx(0.5 + 90 / 5.5)
+    table = bench_fleet.format_table({'runs': runs, 'ray_start_s': 10.0,
+                                      'frames_per_bag': 90.0, 'projection': projection})
+    assert 'PROJECTED, not measured' in table and '1.80' in table

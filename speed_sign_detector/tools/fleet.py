@@ -171,8 +171,9 @@ class _RayEngine:
             try:
                 if address is not None:
                     ray.init(address=address, log_to_driver=self.options.verbose)
-                else:
-                    ray.init(include_dashboard=False, log_to_driver=self.options.verbose,
+                else:   # 'local': a new Ray here, not one another user left running
+                    ray.init(address='local', include_dashboard=False,
+                             log_to_driver=self.options.verbose,
                              object_store_memory=LOCAL_OBJECT_STORE_BYTES)
             except (ConnectionError, RuntimeError, ValueError) as err:
                 hint = ('; if the cluster uses token authentication (Ray >= 2.59 starts it '
