@@ -8,6 +8,9 @@ from glob import glob
 from setuptools import find_packages, setup
 
 PACKAGE_NAME = 'speed_sign_detector'
+# `speed_sign_eval fleet`: Ray Core, matplotlib for the summary picture. The test and
+# bench extras include it, so `make test` / `make bench` install it.
+FLEET_REQUIRES = ['ray>=2.10', 'matplotlib']
 
 setup(
     name=PACKAGE_NAME,
@@ -35,8 +38,9 @@ setup(
         'ros-jazzy-common-interfaces>=5.3',
     ],
     extras_require={
-        'test': ['pytest>=7', 'colcon-core', 'colcon-ros'],
-        'bench': ['radsym', 'matplotlib'],
+        'fleet': FLEET_REQUIRES,
+        'test': ['pytest>=7', 'colcon-core', 'colcon-ros', *FLEET_REQUIRES],
+        'bench': ['radsym', 'matplotlib', *FLEET_REQUIRES],
     },
     package_data={PACKAGE_NAME: ['recognition/data/*.npz']},
     zip_safe=False,

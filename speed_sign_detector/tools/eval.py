@@ -8,6 +8,8 @@ Subcommands (each in its own module, registered here):
   (:mod:`speed_sign_detector.tools.eval_crops`).
 - ``bag BAG``: a recorded drive through the full pipeline, per-sign metrics against a
   truth file, optional results bag (:mod:`speed_sign_detector.tools.eval_bag`).
+- ``fleet BAG... | --manifest CSV``: many bags on Ray (this machine or a cluster),
+  resumable, the per-sign metrics summed (:mod:`speed_sign_detector.tools.fleet`).
 
 With ``--json`` the last line on stdout is ONE JSON object; progress and logs go to
 stderr. Exit status: 0 on success, 1 when the evaluation failed with an error, 2 for
@@ -20,18 +22,19 @@ import logging
 import sys
 
 from speed_sign_detector.errors import SpeedSignError
-from speed_sign_detector.tools import eval_bag, eval_crops, eval_scenes
+from speed_sign_detector.tools import eval_bag, eval_crops, eval_scenes, fleet
 
-SUBCOMMAND_MODULES = (eval_scenes, eval_crops, eval_bag)
+SUBCOMMAND_MODULES = (eval_scenes, eval_crops, eval_bag, fleet)
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every available subcommand registered."""
     parser = argparse.ArgumentParser(
         prog='speed_sign_eval', description='Evaluate speed-limit sign detection and '
-        'recognition on scenes, crops or bags.')
+        'recognition on scenes, crops, bags or many bags (fleet).')
     parser.add_argument('-v', '--verbose', action='store_true', help='debug logging on stderr')
-    subparsers = parser.add_subparsers(dest='command', required=True, metavar='{scenes,crops,bag}')
+    subparsers = parser.add_subparsers(dest='command', required=True,
+                                       metavar='{scenes,crops,bag,fleet}')
     for module in SUBCOMMAND_MODULES:
         module.register(subparsers)
     return parser
