@@ -13,6 +13,8 @@ Both are cheap (about 0.1 ms per sign) and numpy only.
 """
 from __future__ import annotations
 
+import math
+
 import cv2
 import numpy as np
 
@@ -47,17 +49,20 @@ def aligned_patches(gray: np.ndarray, signs: np.ndarray) -> np.ndarray:
     signs = np.asarray(signs, dtype=np.float64).reshape(-1, 3)
     patches = np.empty((len(signs), PATCH_PX, PATCH_PX), np.float32)
     half = PATCH_PX / 2.0
+    height, width = gray.shape
     for index, (x_px, y_px, radius_px) in enumerate(signs):
         scale = half / max(float(radius_px), 1e-3)
-        # pixel centre convention: image point (x, y) maps to patch point (half, half)
-        matrix = np.float32([[scale, 0.0, half - 0.5 - (x_px - 0.5) * scale],
-                             [0.0, scale, half - 0.5 - (y_px - 0.5) * scale]])
+        # a window of the image just around the sign (smoothed there only, when reduced)
+        reach = int(math.ceil(float(radius_px) * 1.1)) + 3
+        left = min(max(int(math.floor(x_px)) - reach, 0), max(width - 1, 0))
+        top = min(max(int(math.floor(y_px)) - reach, 0), max(height - 1, 0))
+        window = gray[top:min(top + 2 * reach + 1, height), left:min(left + 2 * reach + 1, width)]
         if scale < 1.0:  # reduce: smooth first so the resampling does not alias
-            sigma = 0.5 / scale
-            source = cv2.GaussianBlur(gray, (0, 0), sigma)
-        else:
-            source = gray
-        patches[index] = cv2.warpAffine(source, matrix, (PATCH_PX, PATCH_PX),
+            window = cv2.GaussianBlur(window, (0, 0), 0.5 / scale)
+        # pixel centre convention: image point (x, y) maps to patch point (half, half)
+        matrix = np.float32([[scale, 0.0, half - 0.5 - (x_px - left - 0.5) * scale],
+                             [0.0, scale, half - 0.5 - (y_px - top - 0.5) * scale]])
+        patches[index] = cv2.warpAffine(window, matrix, (PATCH_PX, PATCH_PX),
                                         flags=cv2.INTER_LINEAR,
                                         borderMode=cv2.BORDER_REPLICATE)
     return patches
