@@ -1,0 +1,198 @@
+"""Frames lost before they reached the node, estimated from the gaps between header stamps.
+
+A camera stamps its frames at a steady period T (with some jitter). When best-effort DDS
+drops a frame (a ~1 MB raw image overflowing the socket buffer is lost whole), the next
+frame that arrives is stamped ~2T after the previous one: a gap of k periods means k - 1
+frames were lost on the way.
+
+The period is not configured: it is estimated from the gaps themselves, separately on
+each side of the gap being judged, so that a source that changes rate is not mistaken
+for one that loses frames:
+
+* each gap is judged once the ``lookahead_gaps`` gaps after it are known (a report
+  judges the newest gaps provisionally, with the later gaps there are);
+* the period before it is estimated from up to ``history_gaps`` earlier gaps, the period
+  after it from the following ones: the smallest gap of a side, then the median of the
+  gaps below 1.5 x that smallest one (the single-period gaps: robust to jitter and to
+  losses, which only make gaps longer);
+* a gap counts ``min(round(gap / period_before), round(gap / period_after)) - 1`` lost
+  frames. A camera that slows from 30 to 10 Hz shows 3T gaps before the change, but T'
+  = 3T gaps after it: nothing is counted. A camera that speeds up is the mirror case.
+
+Gaps of zero (the same stamp twice), stamps going back (a restarted source or a looped
+bag) and gaps longer than ``pause_s`` (a source that paused) are not losses: a jump
+back or a pause restarts the estimate. Pure Python, no ROS: the node feeds it stamps.
+"""
+from __future__ import annotations
+
+import statistics
+from collections import deque
+from dataclasses import dataclass
+
+#: Gaps shorter than this factor times the smallest gap of a window count as one period.
+SINGLE_PERIOD_FACTOR = 1.5
+#: Earlier gaps needed before they give a period of their own.
+MIN_GAPS_FOR_PERIOD = 3
+#: Periods before and after a gap closer than this fraction are the same rate.
+SAME_PERIOD_TOLERANCE = 0.15
+
+
+@dataclass(frozen=True)
+class TransportLossReport:
+    """What an estimator knows now.
+
+    Attributes:
+        frames_received: stamps fed (every frame that reached the node).
+        frames_lost: frames estimated lost before reaching the node.
+        frame_period_s: the source's current frame period estimate, seconds (None until
+            two gaps were seen).
+    """
+
+    frames_received: int
+    frames_lost: int
+    frame_period_s: float | None
+
+    @property
+    def lost_share(self) -> float:
+        """Lost frames / frames the source sent (received + lost); 0 with no frames."""
+        sent = self.frames_received + self.frames_lost
+        return self.frames_lost / sent if sent else 0.0
+
+
+def period_from_gaps(gaps_ns: list[int]) -> int | None:
+    """The frame period of a run of gaps (ns): the median of the single-period gaps.
+
+    Returns None for an empty list.
+    """
+    if not gaps_ns:
+        return None
+    smallest = min(gaps_ns)
+    singles = [gap for gap in gaps_ns if gap < SINGLE_PERIOD_FACTOR * smallest]
+    return int(statistics.median(singles))
+
+
+class TransportLossEstimator:
+    """Counts frames missing from one stream of header stamps (one topic).
+
+    Args:
+        history_gaps: earlier gaps used for the period before a gap.
+        lookahead_gaps: later gaps a gap waits for before it is judged (its count then
+            is committed; until then reports judge it provisionally with fewer).
+        pause_s: a longer gap is a pause of the source, not a loss.
+    """
+
+    def __init__(self, history_gaps: int = 30, lookahead_gaps: int = 8,
+                 pause_s: float = 1.0) -> None:
+        if history_gaps < 1 or lookahead_gaps < 1 or pause_s <= 0:
+            raise ValueError('history_gaps and lookahead_gaps must be >= 1, pause_s > 0')
+        self._history_gaps = history_gaps
+        self._lookahead_gaps = lookahead_gaps
+        self._pause_ns = int(pause_s * 1e9)
+        self._judged: deque[int] = deque(maxlen=history_gaps)
+        self._pending: list[int] = []
+        self._last_stamp_ns: int | None = None
+        self._received = 0
+        self._lost = 0
+
+    def add(self, stamp_ns: int) -> None:
+        """Feed the header stamp (ns) of the next frame that arrived."""
+        self._received += 1
+        last, self._last_stamp_ns = self._last_stamp_ns, stamp_ns
+        if last is None:
+            return
+        gap = stamp_ns - last
+        if gap == 0:
+            return  # the same frame twice (or two topics of one camera): no gap
+        if gap < 0 or gap > self._pause_ns:
+            self._restart()
+            return
+        self._pending.append(gap)
+        while len(self._pending) > self._lookahead_gaps:
+            self._judge_first()
+
+    def flush(self) -> None:
+        """Judge the gaps still waiting for their lookahead, with the gaps there are."""
+        while self._pending:
+            self._judge_first()
+
+    def report(self) -> TransportLossReport:
+        """Counts so far. Gaps still waiting for their lookahead are judged provisionally
+        (with the later gaps there are), without committing their count."""
+        history = deque(self._judged, maxlen=self._history_gaps)
+        provisional = 0
+        for index, gap in enumerate(self._pending):
+            provisional += lost_in_gap(gap, list(history), self._pending[index + 1:])
+            history.append(gap)
+        recent = list(self._judged) + self._pending
+        period = period_from_gaps(recent) if len(recent) >= 2 else None
+        return TransportLossReport(self._received, self._lost + provisional,
+                                   period * 1e-9 if period is not None else None)
+
+    def _judge_first(self) -> None:
+        gap = self._pending.pop(0)
+        self._lost += lost_in_gap(gap, list(self._judged), self._pending)
+        self._judged.append(gap)
+
+    def _restart(self) -> None:
+        """A jump back or a pause: judge what is pending, start a fresh period estimate."""
+        self.flush()
+        self._judged.clear()
+
+
+def lost_in_gap(gap_ns: int, earlier_ns: list[int], later_ns: list[int]) -> int:
+    """Frames lost in a gap, judged against the periods before and after it (see module).
+
+    With fewer than :data:`MIN_GAPS_FOR_PERIOD` earlier gaps (a stream that just began)
+    the period after the gap stands for both; with no later gap yet (the newest gap),
+    the period before it does. When both periods agree (within
+    :data:`SAME_PERIOD_TOLERANCE`), their gaps are pooled for one, finer estimate.
+    """
+    before = period_from_gaps(earlier_ns) if len(earlier_ns) >= MIN_GAPS_FOR_PERIOD else None
+    after = period_from_gaps([gap_ns, *later_ns]) if later_ns else None
+    before, after = before or after, after or before
+    if before is None or after is None:
+        return 0
+    if abs(before - after) <= SAME_PERIOD_TOLERANCE * min(before, after):
+        pooled = period_from_gaps([*earlier_ns, gap_ns, *later_ns])
+        before = after = pooled if pooled is not None else before
+    periods = min(round(gap_ns / before), round(gap_ns / after))
+    return max(periods - 1, 0)
+
+
+class TransportLossMonitor:
+    """One estimator per topic, and the loss between two reports (for warnings).
+
+    Not thread-safe: the node calls it under its statistics lock.
+    """
+
+    def __init__(self, **estimator_options: float) -> None:
+        self._options = estimator_options
+        self._estimators: dict[str, TransportLossEstimator] = {}
+        self._reported = (0, 0)
+
+    def add(self, topic: str, stamp_ns: int) -> None:
+        """Feed a frame's header stamp (ns) as it arrives on ``topic``."""
+        if stamp_ns <= 0:
+            return  # unstamped frames carry no timing
+        estimator = self._estimators.get(topic)
+        if estimator is None:
+            estimator = self._estimators[topic] = TransportLossEstimator(**self._options)
+        estimator.add(stamp_ns)
+
+    def totals(self) -> TransportLossReport:
+        """Every topic's counts summed; the period is the busiest topic's."""
+        reports = [estimator.report() for estimator in self._estimators.values()]
+        if not reports:
+            return TransportLossReport(0, 0, None)
+        busiest = max(reports, key=lambda report: report.frames_received)
+        return TransportLossReport(sum(r.frames_received for r in reports),
+                                   sum(r.frames_lost for r in reports),
+                                   busiest.frame_period_s)
+
+    def since_last_call(self) -> TransportLossReport:
+        """Totals minus those at the previous call: the loss over the last interval."""
+        totals = self.totals()
+        received, lost = self._reported
+        self._reported = (totals.frames_received, totals.frames_lost)
+        return TransportLossReport(totals.frames_received - received,
+                                   totals.frames_lost - lost, totals.frame_period_s)
