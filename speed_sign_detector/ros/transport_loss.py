@@ -21,7 +21,12 @@ for one that loses frames:
 
 Gaps of zero (the same stamp twice), stamps going back (a restarted source or a looped
 bag) and gaps longer than ``pause_s`` (a source that paused) are not losses: a jump
-back or a pause restarts the estimate. Pure Python, no ROS: the node feeds it stamps.
+back or a pause restarts the estimate. A source that stamps frames when it publishes
+them (a replay with ``--restamp``, some drivers) and is starved of CPU sends late
+frames in bursts: a long gap followed by very short ones. The short ("burst") gaps are
+left out of the period estimate, and each repays one frame of an apparent loss among
+the gaps just before it: the frames were late, not lost. Pure Python, no ROS: the node
+feeds it stamps.
 """
 from __future__ import annotations
 
@@ -35,6 +40,10 @@ SINGLE_PERIOD_FACTOR = 1.5
 MIN_GAPS_FOR_PERIOD = 3
 #: Periods before and after a gap closer than this fraction are the same rate.
 SAME_PERIOD_TOLERANCE = 0.15
+#: Gaps shorter than this fraction of the median gap are bursts, not periods.
+BURST_FRACTION = 0.3
+#: No camera stream runs faster than this period (500 Hz): shorter gaps are bursts.
+MIN_FRAME_PERIOD_NS = 2_000_000
 
 
 @dataclass(frozen=True)
@@ -62,13 +71,25 @@ class TransportLossReport:
 def period_from_gaps(gaps_ns: list[int]) -> int | None:
     """The frame period of a run of gaps (ns): the median of the single-period gaps.
 
-    Returns None for an empty list.
+    Burst gaps (see :func:`burst_threshold_ns`) are left out. Returns None when no gap
+    is left.
     """
     if not gaps_ns:
         return None
-    smallest = min(gaps_ns)
-    singles = [gap for gap in gaps_ns if gap < SINGLE_PERIOD_FACTOR * smallest]
+    threshold = burst_threshold_ns(gaps_ns)
+    regular = [gap for gap in gaps_ns if gap >= threshold]
+    if not regular:
+        return None
+    smallest = min(regular)
+    singles = [gap for gap in regular if gap < SINGLE_PERIOD_FACTOR * smallest]
     return int(statistics.median(singles))
+
+
+def burst_threshold_ns(gaps_ns: list[int]) -> float:
+    """Gaps below this are bursts: frames published late in a row (a source stamping at
+    publish time while starved of CPU), not the camera's period: below
+    :data:`BURST_FRACTION` of the median gap, or below :data:`MIN_FRAME_PERIOD_NS`."""
+    return max(MIN_FRAME_PERIOD_NS, BURST_FRACTION * statistics.median(gaps_ns))
 
 
 class TransportLossEstimator:
@@ -92,7 +113,7 @@ class TransportLossEstimator:
         self._pending: list[int] = []
         self._last_stamp_ns: int | None = None
         self._received = 0
-        self._lost = 0
+        self._ledger = LossLedger(lookahead_gaps)
 
     def add(self, stamp_ns: int) -> None:
         """Feed the header stamp (ns) of the next frame that arrived."""
@@ -119,18 +140,18 @@ class TransportLossEstimator:
         """Counts so far. Gaps still waiting for their lookahead are judged provisionally
         (with the later gaps there are), without committing their count."""
         history = deque(self._judged, maxlen=self._history_gaps)
-        provisional = 0
+        ledger = self._ledger.copy()
         for index, gap in enumerate(self._pending):
-            provisional += lost_in_gap(gap, list(history), self._pending[index + 1:])
+            ledger.apply(lost_in_gap(gap, list(history), self._pending[index + 1:]))
             history.append(gap)
         recent = list(self._judged) + self._pending
         period = period_from_gaps(recent) if len(recent) >= 2 else None
-        return TransportLossReport(self._received, self._lost + provisional,
+        return TransportLossReport(self._received, ledger.lost,
                                    period * 1e-9 if period is not None else None)
 
     def _judge_first(self) -> None:
         gap = self._pending.pop(0)
-        self._lost += lost_in_gap(gap, list(self._judged), self._pending)
+        self._ledger.apply(lost_in_gap(gap, list(self._judged), self._pending))
         self._judged.append(gap)
 
     def _restart(self) -> None:
@@ -140,7 +161,8 @@ class TransportLossEstimator:
 
 
 def lost_in_gap(gap_ns: int, earlier_ns: list[int], later_ns: list[int]) -> int:
-    """Frames lost in a gap, judged against the periods before and after it (see module).
+    """Frames lost in a gap, judged against the periods before and after it (see module);
+    -1 for a burst gap (a frame that came early: it repays an apparent loss just before).
 
     With fewer than :data:`MIN_GAPS_FOR_PERIOD` earlier gaps (a stream that just began)
     the period after the gap stands for both; with no later gap yet (the newest gap),
@@ -155,8 +177,35 @@ def lost_in_gap(gap_ns: int, earlier_ns: list[int], later_ns: list[int]) -> int:
     if abs(before - after) <= SAME_PERIOD_TOLERANCE * min(before, after):
         pooled = period_from_gaps([*earlier_ns, gap_ns, *later_ns])
         before = after = pooled if pooled is not None else before
+    if gap_ns < 0.5 * min(before, after):
+        return -1
     periods = min(round(gap_ns / before), round(gap_ns / after))
     return max(periods - 1, 0)
+
+
+class LossLedger:
+    """Running count of lost frames; a burst gap repays an apparent loss among the last
+    ``window`` gaps (frames that were late, not lost), never an older one."""
+
+    def __init__(self, window: int) -> None:
+        self.lost = 0
+        self._recent: deque[int] = deque(maxlen=window)
+
+    def copy(self) -> LossLedger:
+        twin = LossLedger(self._recent.maxlen or 1)
+        twin.lost, twin._recent = self.lost, deque(self._recent, maxlen=self._recent.maxlen)
+        return twin
+
+    def apply(self, contribution: int) -> None:
+        """Book one judged gap (a :func:`lost_in_gap` result)."""
+        if contribution >= 0:
+            self.lost += contribution
+            self._recent.append(contribution)
+        elif sum(self._recent) > 0:
+            self.lost -= 1
+            self._recent.append(-1)
+        else:
+            self._recent.append(0)
 
 
 class TransportLossMonitor:
