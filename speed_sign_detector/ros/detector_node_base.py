@@ -191,6 +191,11 @@ class DetectorNodeBase:
             worker.join()
         self._worker = None
 
+    @property
+    def pipeline_running(self) -> bool:
+        """True while the worker thread holds a built pipeline (and its GL context)."""
+        return self._worker is not None and self._worker.is_alive()
+
     def create_outputs(self, create_publisher: Callable[..., Any]) -> None:
         """Create the output publishers with ``create_publisher`` (plain or lifecycle)."""
         self._candidates_pub = create_publisher(PointCloud2, 'candidates', 10)
