@@ -104,6 +104,7 @@ class DetectorNodeBase:
         Raises:
             ConfigError: for invalid initial parameters.
         """
+        self._worker: threading.Thread | None = None  # before anything that may fail
         self._pipeline_specs = parameter_specs()
         self._pipeline_names = frozenset(spec.name for spec in self._pipeline_specs)
         declare_node_parameters(self)
@@ -126,7 +127,6 @@ class DetectorNodeBase:
         self._fallback_reason: str | None = None
         self._last_tick = (time.monotonic(), 0)
         self._published_limit_kmh: int | None = None
-        self._worker: threading.Thread | None = None
         self._worker_error: BaseException | None = None
         self._candidates_pub: Any = None
         self._speed_limit_pub: Any = None
@@ -180,7 +180,7 @@ class DetectorNodeBase:
     def stop_pipeline(self) -> None:
         """Stop the worker and recognition threads (the worker closes the pipeline and
         its GL context on its own thread). Idempotent."""
-        worker = self._worker
+        worker = getattr(self, '_worker', None)
         if worker is None:
             return
         with self._condition:
@@ -194,7 +194,8 @@ class DetectorNodeBase:
     @property
     def pipeline_running(self) -> bool:
         """True while the worker thread holds a built pipeline (and its GL context)."""
-        return self._worker is not None and self._worker.is_alive()
+        worker = getattr(self, '_worker', None)
+        return worker is not None and worker.is_alive()
 
     def create_outputs(self, create_publisher: Callable[..., Any]) -> None:
         """Create the output publishers with ``create_publisher`` (plain or lifecycle)."""
