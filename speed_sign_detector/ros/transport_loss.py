@@ -18,6 +18,9 @@ for one that loses frames:
 * a gap counts ``min(round(gap / period_before), round(gap / period_after)) - 1`` lost
   frames. A camera that slows from 30 to 10 Hz shows 3T gaps before the change, but T'
   = 3T gaps after it: nothing is counted. A camera that speeds up is the mirror case.
+  When the gaps after are whole but *different* multiples of the period before (2T,
+  4T, 3T, ...), the source did not slow down: it is losing most of its frames, and
+  the period before stands for both.
 
 Gaps of zero (the same stamp twice), stamps going back (a restarted source or a looped
 bag) and gaps longer than ``pause_s`` (a source that paused) are not losses: a jump
@@ -174,6 +177,9 @@ def lost_in_gap(gap_ns: int, earlier_ns: list[int], later_ns: list[int]) -> int:
     before, after = before or after, after or before
     if before is None or after is None:
         return 0
+    if after > (1 + SAME_PERIOD_TOLERANCE) * before and irregular_multiples(
+            [gap_ns, *later_ns], before):
+        after = before  # heavy loss, not a slower source: see irregular_multiples
     if abs(before - after) <= SAME_PERIOD_TOLERANCE * min(before, after):
         pooled = period_from_gaps([*earlier_ns, gap_ns, *later_ns])
         before = after = pooled if pooled is not None else before
@@ -181,6 +187,15 @@ def lost_in_gap(gap_ns: int, earlier_ns: list[int], later_ns: list[int]) -> int:
         return -1
     periods = min(round(gap_ns / before), round(gap_ns / after))
     return max(periods - 1, 0)
+
+
+def irregular_multiples(gaps_ns: list[int], period_ns: int) -> bool:
+    """True when the gaps are whole multiples of ``period_ns`` (within 0.2) but not all
+    the same multiple: frames lost at random from a source still at that period. A
+    source that slowed down gives the same (or a fractional) multiple every time."""
+    ratios = [gap / period_ns for gap in gaps_ns]
+    whole = all(abs(ratio - round(ratio)) < 0.2 for ratio in ratios)
+    return whole and len({round(ratio) for ratio in ratios}) > 1
 
 
 class LossLedger:
