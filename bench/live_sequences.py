@@ -64,7 +64,6 @@ RUNS = ('profile', 'default')
 FIRST_DOMAIN_ID = 71
 START_TIMEOUT_S = 180.0
 SETTLE_S = 3.0
-NODE_NAME = 'speed_sign_detector'
 
 
 class LiveRunError(SpeedSignError):

@@ -320,7 +320,8 @@ class DetectorNodeBase:
     def _on_incompatible_qos(self, event: Any) -> None:
         self.get_logger().warn(
             f'a publisher of an image topic has QoS incompatible with this subscriber '
-            f'({describe_qos(IMAGE_QOS)}); last incompatible policy: '
+            f'({describe_qos(self._image_sub.qos_profile if self._image_sub else IMAGE_QOS)}'
+            f'); last incompatible policy: '
             f'{getattr(event.last_policy_kind, "name", event.last_policy_kind)}. Publish '
             f'with compatible QoS or override it with the qos_overrides parameters.')
 
