@@ -87,6 +87,11 @@ TRANSPORT_LOSS_FIX = (
     'FASTRTPS_DEFAULT_PROFILES_FILE=$(ros2 pkg prefix speed_sign_detector)/share/'
     'speed_sign_detector/config/fastdds_large_images.xml for the camera driver (or '
     '`ros2 bag play`) AND this node, or subscribe to image/compressed.')
+#: The same for compressed images, which are small enough for Fast DDS's defaults.
+COMPRESSED_LOSS_CAUSE = (
+    'Compressed images are small, so the usual cause is this node starved of CPU (its '
+    'subscription queue, keep last 5, overflows: give it a core, or a deeper queue with '
+    'qos_overrides.<topic>.subscription.depth) or a lossy network between the hosts.')
 
 
 class DetectorNodeBase:
@@ -406,13 +411,18 @@ class DetectorNodeBase:
     def _warn_transport_loss(self, recent_share: float, total: Any) -> None:
         if self._transport_loss_throttle.admit(TRANSPORT_LOSS_LOG_PERIOD_S) is None:
             return
+        with self._stats.lock:
+            lossy = [topic for topic, lost in
+                     self._stats.transport_loss.lost_by_topic().items() if lost]
+        raw_lost = any(not topic.endswith('compressed') for topic in lossy)
         period = total.frame_period_s
+        timing = (f' (gaps in the header stamps against the source\'s {period * 1e3:.1f} ms '
+                  f'frame period)' if period else '')
         self.get_logger().warn(
-            f'frames are lost before they reach this node: {100 * recent_share:.0f} % '
-            f'recently, {total.frames_lost} of {total.frames_received + total.frames_lost} '
-            f'since start (gaps in the header stamps against the source\'s '
-            f'{period * 1e3:.1f} ms frame period). {TRANSPORT_LOSS_FIX}' if period else
-            f'frames are lost before they reach this node. {TRANSPORT_LOSS_FIX}')
+            f'frames are lost before they reach this node on {", ".join(lossy)}: '
+            f'{100 * recent_share:.0f} % recently, {total.frames_lost} of '
+            f'{total.frames_received + total.frames_lost} since start{timing}. '
+            + (TRANSPORT_LOSS_FIX if raw_lost else COMPRESSED_LOSS_CAUSE))
 
     def _warn_if_no_images(self) -> None:
         if self._image_sub is None:

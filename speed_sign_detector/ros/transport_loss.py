@@ -253,6 +253,11 @@ class TransportLossMonitor:
                                    sum(r.frames_lost for r in reports),
                                    busiest.frame_period_s)
 
+    def lost_by_topic(self) -> dict[str, int]:
+        """Frames estimated lost so far, per topic."""
+        return {topic: estimator.report().frames_lost
+                for topic, estimator in self._estimators.items()}
+
     def since_last_call(self) -> TransportLossReport:
         """Totals minus those at the previous call: the loss over the last interval."""
         totals = self.totals()
