@@ -21,7 +21,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import UInt16
 from test_node_cli import tool
 
-DOMAIN_ID = 96
+DOMAIN_ID = 98
 REPORTS = 6
 pytestmark = pytest.mark.ros
 

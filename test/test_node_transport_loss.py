@@ -9,7 +9,8 @@ from __future__ import annotations
 import os
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from typing import Any
 
 import numpy as np
 import pytest
@@ -20,12 +21,13 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
-from test_node import Probe, latest_status, wait_for
+from test_node import Probe, wait_for
 
 from speed_sign_detector.ros.messages import image_message
 from speed_sign_detector.ros.node import SpeedSignDetectorNode
 
 DOMAIN_ID = 94
+NODE_NAME = 'transport_loss_test_node'
 PERIOD_NS = 33_333_333
 START_NS = 1_750_000_000_000_000_000
 #: Frames 0..39 regular; of 40..119 these are never published (12 frames).
@@ -38,7 +40,9 @@ def ros(request: pytest.FixtureRequest) -> Iterator[tuple[SpeedSignDetectorNode,
     os.environ['ROS_DOMAIN_ID'] = str(DOMAIN_ID)
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=DOMAIN_ID)
-    node = SpeedSignDetectorNode(context=context, parameter_overrides=[
+    # a name of its own: /rosout is read back, and other test modules of this process
+    # ran nodes named speed_sign_detector
+    node = SpeedSignDetectorNode(NODE_NAME, context=context, parameter_overrides=[
         Parameter('classify', value=False),
         Parameter('diagnostics_period_s', value=0.3)])
     probe = Probe(context=context)
@@ -56,6 +60,24 @@ def ros(request: pytest.FixtureRequest) -> Iterator[tuple[SpeedSignDetectorNode,
     probe.destroy_node()
     rclpy.shutdown(context=context)
     spinner.join(timeout=10)
+
+
+def latest_status(probe: Probe, key_filter: Callable[[dict[str, Any]], bool]
+                  ) -> dict[str, Any]:
+    """Wait for a status of the node satisfying ``key_filter``: its values, plus
+    ``_message`` and ``_level``."""
+    def found() -> dict[str, Any] | None:
+        with probe.lock:
+            arrays = list(probe.diagnostics)
+        for array in reversed(arrays):
+            for status in array.status:
+                if status.name == f'{NODE_NAME}: pipeline':
+                    values = {kv.key: kv.value for kv in status.values}
+                    values.update(_message=status.message, _level=status.level)
+                    if key_filter(values):
+                        return values
+        return None
+    return wait_for(found, 'a matching /diagnostics status')
 
 
 def publish_frames(probe: Probe, indices: range) -> int:
