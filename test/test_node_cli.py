@@ -128,6 +128,8 @@ class Peer(Node):
         self.image_pub = self.create_publisher(Image, CAMERA_TOPIC, qos_profile_sensor_data)
         self.candidates = 0
         self.create_subscription(PointCloud2, 'candidates', self._on_candidates, 10)
+        # a debug_image subscriber: the node draws and publishes more per frame
+        self.create_subscription(Image, 'debug_image', lambda msg: None, 1)
         self.get_client = self.create_client(GetParameters,
                                              '/speed_sign_detector/get_parameters')
         self.set_client = self.create_client(SetParameters,
