@@ -23,12 +23,15 @@ from typing import Any
 from rclpy.node import Node
 
 from speed_sign_detector.ros.detector_node_base import DetectorNodeBase
-from speed_sign_detector.ros.parameters import (  # noqa: F401 - the node's public names
+from speed_sign_detector.ros.parameters import (
     NODE_NAME,
     READ_ONLY_PARAMETERS,
     default_parameter_file,
     parameter_descriptor,
 )
+
+__all__ = ['NODE_NAME', 'READ_ONLY_PARAMETERS', 'SpeedSignDetectorNode',
+           'default_parameter_file', 'parameter_descriptor']
 
 
 class SpeedSignDetectorNode(DetectorNodeBase, Node):
