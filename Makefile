@@ -24,17 +24,18 @@ demo: $(INSTALLED)
 		--out $(OUT)/demo/results --contact-sheet $(OUT)/demo/contact_sheet.png
 	@echo "results bag: $(OUT)/demo/results   picture: $(OUT)/demo/contact_sheet.png"
 
-## live-demo: node + bag replay + monitor over DDS (real rclpy, Fast DDS), in one command
+## live-demo: node + bag replay + monitor over DDS (real rclpy, Fast DDS), in one command;
+## the monitor prints a line per diagnostics report and, when the drive has ended, the
+## final state (the node idle, its counts, the limit it holds)
 live-demo: $(INSTALLED)
 	rm -rf $(OUT)/live-demo && mkdir -p $(OUT)/live-demo
 	$(BIN)/speed_sign_synth $(OUT)/live-demo/drive --seed 3 --duration 15 --compressed
 	@set -e; export FASTRTPS_DEFAULT_PROFILES_FILE=$(CURDIR)/config/fastdds_large_images.xml; \
 	$(BIN)/speed_sign_detector --ros-args -r image/compressed:=/camera/image_raw/compressed & \
-	node=$$!; trap 'kill -INT $$node 2>/dev/null || true; wait $$node || true' EXIT; \
+	node=$$!; trap 'kill -TERM $$node 2>/dev/null || true; wait $$node || true' EXIT; \
 	$(BIN)/speed_sign_monitor --timeout 120 & monitor=$$!; \
 	$(BIN)/speed_sign_replay $(OUT)/live-demo/drive --restamp --wait 120 -q; \
-	sleep 2; kill -INT $$monitor; wait $$monitor || true; \
-	echo; echo "final state:"; $(BIN)/speed_sign_monitor --once --json --timeout 8
+	sleep 2; kill -TERM $$monitor; wait $$monitor || true
 
 ## test: the test suite (what .ci/run runs)
 test: $(INSTALLED)

@@ -50,7 +50,7 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'speed_sign_detector = speed_sign_detector.ros.node:main',
+            'speed_sign_detector = speed_sign_detector.ros.entry_point:main',
             'speed_sign_eval = speed_sign_detector.tools.eval:main',
             'speed_sign_synth = speed_sign_detector.tools.synth:main',
             'speed_sign_replay = speed_sign_detector.tools.replay:main',

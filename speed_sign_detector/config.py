@@ -306,6 +306,12 @@ class NodeOptions:
                                    'a second thread: on a multi-core machine frames go '
                                    'through at the pace of the slower stage instead of the '
                                    'sum of both, each a little later.')
+    transport_loss_warning_share: float = setting(0.05, 'The status turns WARN, and the '
+                                                  'log warns (every 10 s at most), when more '
+                                                  'than this share of the frames sent since '
+                                                  'the last diagnostics report was lost before '
+                                                  'reaching the node (estimated from gaps in '
+                                                  'the header stamps).', low=0.0, high=1.0)
 
     def __post_init__(self) -> None:
         validate(self)

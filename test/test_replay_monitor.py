@@ -180,9 +180,14 @@ def test_status_line_shows_what_is_known() -> None:
                            candidates_per_frame_mean=2.5, fps=14.2,
                            processing_latency_p50_ms=40.0, processing_latency_p95_ms=61.0,
                            latency_p50_ms=55.0, latency_p95_ms=80.0, frames_processed=100,
-                           frames_dropped=4, backend='gl', status_level='OK').status_line()
+                           frames_dropped=4, frames_lost_in_transport=7,
+                           seconds_since_last_image=0.1, backend='gl',
+                           status_level='OK').status_line()
     assert line == ('limit 50 km/h | candidates 3 (mean 2.5) | fps 14.2 | processing p50 40 '
-                    'p95 61 ms | stamp latency p50 55 p95 80 ms | processed 100 dropped 4 | '
-                    'gl OK')
+                    'p95 61 ms | transport (stamp to receipt) p50 55 p95 80 ms | processed '
+                    '100 dropped 4 lost in transport 7 | gl OK')
     replayed = MonitorSnapshot(active_limit_kmh=0, latency_p50_ms=9e10).status_line()
-    assert 'limit none' in replayed and 'stamp latency old stamps' in replayed
+    assert 'limit none' in replayed and 'transport (stamp to receipt) old stamps' in replayed
+    ended = MonitorSnapshot(active_limit_kmh=80, fps=0.0, frames_processed=450,
+                            seconds_since_last_image=3.4, status_level='OK').status_line()
+    assert 'idle, last image 3 s ago' in ended and 'fps' not in ended

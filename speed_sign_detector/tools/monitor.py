@@ -11,8 +11,15 @@ current value arrives at once), ``candidates`` (sensor_msgs/PointCloud2) and
 or the one named by ``--status``). The status line shows the active limit, candidates
 per frame, the node's processing rate and latency, and dropped frames.
 
-``--once`` waits until all three topics were heard (or ``--timeout`` passes), prints
-one snapshot and exits. Exit status 1 with a message when nothing at all was published
+On a terminal the line is refreshed in place; otherwise (and with ``--json``) one line
+is printed per diagnostics report of the node (or change of limit), and Ctrl-C prints
+the last state as ``final state: ...``. "transport (stamp to receipt)" is the time from
+the image's header stamp to its arrival at the node: transport only, processing is
+shown apart. A node whose stream ended shows as idle.
+
+``--once`` waits until all three topics were heard, or the limit and two diagnostics
+reports of a node whose stream has ended (or ``--timeout`` passes), prints one snapshot
+and exits. Exit status 1 with a message when nothing at all was published
 within ``--timeout`` seconds (is the node running, in the same ROS_DOMAIN_ID?).
 ROS arguments (``--ros-args -r speed_limit:=/car/speed_limit``) are accepted.
 """
@@ -39,8 +46,14 @@ DIAGNOSTIC_FIELDS: dict[str, str] = {
     'frames_processed': 'frames_processed',
     'frames_dropped': 'frames_dropped',
     'frames_rejected_bad_input': 'frames_rejected',
+    'frames_lost_in_transport': 'frames_lost_in_transport',
+    'frames_lost_in_transport_share': 'frames_lost_in_transport_share',
+    'seconds_since_last_image': 'seconds_since_last_image',
     'backend': 'backend',
 }
+#: A node that processed no frame since its last report and got no image for this many
+#: seconds is shown as idle (its stream ended) rather than at "fps 0.0".
+IDLE_AFTER_S = 1.5
 
 
 @dataclass
@@ -55,7 +68,10 @@ class MonitorSnapshot:
         candidates_hz: rate of ``candidates`` messages over the last 30, Hz.
         fps, latency_p50_ms, latency_p95_ms, processing_latency_p50_ms,
         processing_latency_p95_ms, frames_received, frames_processed, frames_dropped,
-        frames_rejected, backend: from the node's ``/diagnostics`` status.
+        frames_rejected, frames_lost_in_transport, frames_lost_in_transport_share,
+        seconds_since_last_image, backend: from the node's ``/diagnostics`` status
+        (``latency_*`` is the stamp latency: receipt time minus header stamp, i.e. the
+        time in transport, processing not included).
         status_level, status_message, status_name: that status' level, message, name.
         messages: messages heard per topic.
         age_s: seconds since the last message of any topic.
@@ -75,6 +91,9 @@ class MonitorSnapshot:
     frames_processed: int | None = None
     frames_dropped: int | None = None
     frames_rejected: int | None = None
+    frames_lost_in_transport: int | None = None
+    frames_lost_in_transport_share: float | None = None
+    seconds_since_last_image: float | None = None
     backend: str | None = None
     status_level: str | None = None
     status_message: str | None = None
@@ -91,18 +110,29 @@ class MonitorSnapshot:
         limit = ('none' if self.active_limit_kmh == 0 else
                  show(self.active_limit_kmh, '{} km/h'))
         if isinstance(self.latency_p50_ms, (int, float)) and self.latency_p50_ms > 60_000:
-            stamp_latency = 'old stamps'   # a replayed bag without --restamp
+            transport = 'old stamps'   # a replayed bag without --restamp
         else:
-            stamp_latency = (f'p50 {show(self.latency_p50_ms, "{:.0f}")} p95 '
-                             f'{show(self.latency_p95_ms, "{:.0f}")} ms')
+            transport = (f'p50 {show(self.latency_p50_ms, "{:.0f}")} p95 '
+                         f'{show(self.latency_p95_ms, "{:.0f}")} ms')
+        if self.is_idle():
+            rate = f'idle, last image {self.seconds_since_last_image:.0f} s ago'
+        else:
+            rate = f'fps {show(self.fps, "{:.1f}")}'
         return (f'limit {limit} | candidates {show(self.candidates_per_frame)}'
-                f' (mean {show(self.candidates_per_frame_mean, "{:.1f}")}) | '
-                f'fps {show(self.fps, "{:.1f}")} | processing p50 '
-                f'{show(self.processing_latency_p50_ms, "{:.0f}")} p95 '
-                f'{show(self.processing_latency_p95_ms, "{:.0f}")} ms | stamp latency '
-                f'{stamp_latency} | processed {show(self.frames_processed)} dropped '
-                f'{show(self.frames_dropped)} | {show(self.backend)} '
+                f' (mean {show(self.candidates_per_frame_mean, "{:.1f}")}) | {rate} | '
+                f'processing p50 {show(self.processing_latency_p50_ms, "{:.0f}")} p95 '
+                f'{show(self.processing_latency_p95_ms, "{:.0f}")} ms | transport (stamp '
+                f'to receipt) {transport} | processed {show(self.frames_processed)} '
+                f'dropped {show(self.frames_dropped)} lost in transport '
+                f'{show(self.frames_lost_in_transport)} | {show(self.backend)} '
                 f'{show(self.status_level)}')
+
+    def is_idle(self) -> bool:
+        """True when the node processed frames before but none lately (stream ended)."""
+        return (isinstance(self.seconds_since_last_image, (int, float))
+                and self.seconds_since_last_image >= IDLE_AFTER_S
+                and self.fps is not None and self.fps == 0
+                and bool(self.frames_processed))
 
 
 class _Monitor:
@@ -215,67 +245,100 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--status', help='name of the /diagnostics status to show (default: '
                         'the one with frames_processed)')
     parser.add_argument('--interval', type=float, default=0.5,
-                        help='seconds between status lines (default 0.5)')
+                        help='seconds between refreshes of the status line on a terminal '
+                        '(default 0.5)')
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     """Run ``speed_sign_monitor``; returns the exit status."""
-    import rclpy
-    from rclpy.executors import ExternalShutdownException
-    from rclpy.utilities import remove_ros_args
-
     argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        import rclpy
+        from rclpy.executors import ExternalShutdownException
+        from rclpy.utilities import remove_ros_args
+        import diagnostic_msgs.msg  # noqa: F401 - checked here, used by _Monitor
+        import sensor_msgs.msg  # noqa: F401
+        import std_msgs.msg  # noqa: F401
+    except ImportError as err:
+        from speed_sign_detector.ros.entry_point import missing_ros_message
+        print(missing_ros_message('speed_sign_monitor', err), file=sys.stderr)
+        return 1
     args = build_parser().parse_args(remove_ros_args(['speed_sign_monitor', *argv])[1:])
     rclpy.init(args=['speed_sign_monitor', *argv])
     node = rclpy.create_node('speed_sign_monitor')
+    monitor: _Monitor | None = None
     try:
         monitor = _Monitor(node, args.status)
         return _run(node, monitor, args)
     except (KeyboardInterrupt, ExternalShutdownException):
-        return 130
+        if monitor is None or not monitor.heard_any():
+            return 130
+        _print_snapshot(monitor.snapshot, args, prefix='\nfinal state: ' if
+                        sys.stdout.isatty() and not args.json else 'final state: ')
+        return 0
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
 
 
+def _print_snapshot(snapshot: MonitorSnapshot, args: argparse.Namespace,
+                    prefix: str = '') -> None:
+    if args.json:
+        print(json.dumps(asdict(snapshot)), flush=True)
+    else:
+        print(prefix + snapshot.status_line(), flush=True)
+
+
+def _once_complete(monitor: _Monitor) -> bool:
+    """--once: every topic heard, or the node's stream has ended (limit and two
+    diagnostics reports heard, which say it processed frames but is idle now: no
+    candidates will come)."""
+    snapshot = monitor.snapshot
+    return monitor.heard_all() or (snapshot.messages['speed_limit'] > 0
+                                   and snapshot.messages['diagnostics'] >= 2
+                                   and snapshot.is_idle())
+
+
 def _run(node: Any, monitor: _Monitor, args: argparse.Namespace) -> int:
+    """Spin until --once is satisfied or nothing is heard for --timeout. On a terminal
+    the status line is refreshed in place every --interval; otherwise (and with --json)
+    a line is printed for each new diagnostics report or limit, not more often."""
     import rclpy
 
     started = time.monotonic()
     terminal = sys.stdout.isatty() and not args.json
     next_print = started + args.interval
+    printed_state: tuple[int, int | None] | None = None
     while True:
         rclpy.spin_once(node, timeout_sec=0.05)
         now = time.monotonic()
         monitor.refresh_age()
         silent_s = (monitor.snapshot.age_s if monitor.heard_any() else now - started)
         if args.once:
-            if monitor.heard_all() or (now - started >= args.timeout):
+            if _once_complete(monitor) or (now - started >= args.timeout):
                 break
             continue
         if silent_s is not None and silent_s >= args.timeout:
             if terminal:
                 print()
             break
-        if now >= next_print:
-            next_print = now + args.interval
-            if args.json:
-                print(json.dumps(asdict(monitor.snapshot)), flush=True)
-            elif terminal:
+        if terminal:
+            if now >= next_print:
+                next_print = now + args.interval
                 print(f'\r{monitor.snapshot.status_line():<120}', end='', flush=True)
-            else:
-                print(monitor.snapshot.status_line(), flush=True)
+            continue
+        state = (monitor.snapshot.messages['diagnostics'], monitor.snapshot.active_limit_kmh)
+        if monitor.heard_any() and state != printed_state:
+            printed_state = state
+            _print_snapshot(monitor.snapshot, args)
     if not monitor.heard_any():
         print(f'speed_sign_monitor: error: nothing published on speed_limit, candidates or '
               f'/diagnostics within {args.timeout:g} s; is speed_sign_detector running with '
               f'the same ROS_DOMAIN_ID (here {_domain_id()}) and namespace?', file=sys.stderr)
         return 1
     if args.once:
-        if args.json:
-            print(json.dumps(asdict(monitor.snapshot)))
-        else:
-            print(monitor.snapshot.status_line())
+        _print_snapshot(monitor.snapshot, args)
         return 0
     print(f'speed_sign_monitor: error: nothing published for {args.timeout:g} s; the node '
           f'stopped or its topics were remapped', file=sys.stderr)

@@ -51,7 +51,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help='playback speed factor (default 1.0 = recorded timing)')
     parser.add_argument('--loop', action='store_true', help='start again at the end')
     parser.add_argument('--restamp', action='store_true',
-                        help='set header stamps to the publishing time')
+                        help='set header stamps to the time each message is due (the '
+                        'recorded timing from now on, like a camera\'s capture times: a '
+                        'message published late shows as latency, not as a stamp gap)')
     parser.add_argument('--wait', type=float, default=5.0,
                         help='seconds to wait for a subscriber before playing (default 5)')
     parser.add_argument('--depth', type=int, default=5, help='publisher queue depth')
@@ -136,6 +138,7 @@ def _play_once(bag: BagReader, topic: str, message_class: type, publisher: Any, 
     """One pass over the bag with the recorded timing; returns (published, error)."""
     first_log_ns: int | None = None
     started = time.monotonic()
+    started_clock_ns = node.get_clock().now().nanoseconds
     published = 0
     progress = not args.quiet and sys.stderr.isatty()
     deserialize = args.restamp or not bag.is_ros2
@@ -143,14 +146,16 @@ def _play_once(bag: BagReader, topic: str, message_class: type, publisher: Any, 
         for item in bag.messages(topic, deserialize=deserialize):
             if first_log_ns is None:
                 first_log_ns = item.log_time_ns
-            due = started + (item.log_time_ns - first_log_ns) * 1e-9 / args.rate
+            offset_ns = int((item.log_time_ns - first_log_ns) / args.rate)
+            due = started + offset_ns * 1e-9
             delay = due - time.monotonic()
             if delay > 0:
                 time.sleep(delay)
             if bag.is_ros2 and not args.restamp:
                 publisher.publish(item.raw)
             else:
-                publisher.publish(to_rclpy(item, message_class, node if args.restamp else None))
+                publisher.publish(to_rclpy(item, message_class, started_clock_ns + offset_ns
+                                           if args.restamp else None))
             published += 1
             if progress and published % 10 == 0:
                 print(f'\r{published} messages', end='', file=sys.stderr, flush=True)
@@ -159,13 +164,13 @@ def _play_once(bag: BagReader, topic: str, message_class: type, publisher: Any, 
     return published, None
 
 
-def to_rclpy(item: BagMessage, message_class: type, restamp_node: Any | None = None) -> Any:
+def to_rclpy(item: BagMessage, message_class: type, restamp_ns: int | None = None) -> Any:
     """Build the rclpy Image / CompressedImage equal to a rosbags message (ROS 1 or 2).
 
     Args:
         item: a message read with :class:`speed_sign_detector.bag_io.BagReader`.
         message_class: ``sensor_msgs.msg.Image`` or ``CompressedImage``.
-        restamp_node: when given, the header stamp is this node's current time.
+        restamp_ns: when given, the header stamp (ns since the epoch).
     """
     from builtin_interfaces.msg import Time
     from std_msgs.msg import Header
@@ -174,8 +179,9 @@ def to_rclpy(item: BagMessage, message_class: type, restamp_node: Any | None = N
 
     source = item.message
     stamp_ns = header_stamp_ns(source, item.log_time_ns)
-    stamp = (restamp_node.get_clock().now().to_msg() if restamp_node is not None else
-             Time(sec=stamp_ns // 1_000_000_000, nanosec=stamp_ns % 1_000_000_000))
+    if restamp_ns is not None:
+        stamp_ns = restamp_ns
+    stamp = Time(sec=stamp_ns // 1_000_000_000, nanosec=stamp_ns % 1_000_000_000)
     header = Header(stamp=stamp, frame_id=str(source.header.frame_id))
     if item.msgtype == COMPRESSED_IMAGE_MSGTYPE:
         return build(message_class, header=header, format=str(source.format),
