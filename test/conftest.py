@@ -17,3 +17,13 @@ def shared_data_dir() -> Path:
         pytest.skip(f'real data not available: {SHARED_DATA_DIR} does not exist '
                     '(it lives beside the project checkout, see README "Data")')
     return SHARED_DATA_DIR
+
+
+@pytest.fixture(scope='module')
+def bank_config(pytestconfig: pytest.Config, tmp_path_factory: pytest.TempPathFactory
+                ) -> Path:
+    """A node parameter file caching the classifier's filter banks between runs."""
+    cache_dir = pytestconfig.cache.mkdir('speed_sign_filter_banks')
+    path = tmp_path_factory.mktemp('config') / 'params.yaml'
+    path.write_text(f'classifier:\n  cache_dir: "{cache_dir}"\n')
+    return path

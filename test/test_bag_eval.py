@@ -27,16 +27,6 @@ CONFIG = DriveConfig(seed=1, duration_s=2.6, fps=20)
 Evaluate = Callable[..., tuple[int, str, str]]
 
 
-@pytest.fixture(scope='module')
-def bank_config(pytestconfig: pytest.Config, tmp_path_factory: pytest.TempPathFactory
-                ) -> Path:
-    """A node parameter file caching the classifier's filter banks between runs."""
-    cache_dir = pytestconfig.cache.mkdir('speed_sign_filter_banks')
-    path = tmp_path_factory.mktemp('config') / 'params.yaml'
-    path.write_text(f'classifier:\n  cache_dir: "{cache_dir}"\n')
-    return path
-
-
 @pytest.fixture()
 def evaluate(capsys: pytest.CaptureFixture[str], bank_config: Path) -> Evaluate:
     """Run ``speed_sign_eval bag ARGS --config BANK_CONFIG``: (status, stdout, stderr)."""

@@ -59,16 +59,6 @@ def ray_cluster() -> Any:
 
 
 @pytest.fixture(scope='module')
-def bank_config(pytestconfig: pytest.Config, tmp_path_factory: pytest.TempPathFactory
-                ) -> Path:
-    """A node parameter file caching the classifier's filter banks between runs."""
-    cache_dir = pytestconfig.cache.mkdir('speed_sign_filter_banks')
-    path = tmp_path_factory.mktemp('config') / 'params.yaml'
-    path.write_text(f'classifier:\n  cache_dir: "{cache_dir}"\n')
-    return path
-
-
-@pytest.fixture(scope='module')
 def drives(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     """The bags (4 formats), their truth files, a truncated bag, a manifest listing all."""
     folder = tmp_path_factory.mktemp('drives')
