@@ -3,14 +3,15 @@
 Reading (:class:`BagReader`):
 
 - Opens a ROS 2 bag directory (``metadata.yaml`` + storage files), a bare ``.mcap`` or
-  ``.db3`` file, or a ROS 1 ``.bag`` file with rosbags' ``AnyReader``.
+  ``.db3`` file, or a ROS 1 bag file with rosbags' ``AnyReader``. A ROS 1 bag is
+  recognized by its content (``#ROSBAG V2.0``), also when its name lacks ``.bag``.
 - Finds the image topic (``sensor_msgs/Image`` or ``sensor_msgs/CompressedImage``):
   :meth:`BagReader.image_topic` picks the only one, or the one asked for, and otherwise
   raises :class:`BagError` listing the candidates.
 - Truncated recordings (a recorder killed before it closed the file): an MCAP file
   without its footer, or a ROS 1 bag without its index, cannot be opened by rosbags.
   :class:`BagReader` then falls back to scanning the file record by record
-  ("salvage mode"), yields every complete message, and raises :class:`BagError` once
+  ("salvage mode", :mod:`speed_sign_detector.bag_salvage`), yields every complete message, and raises :class:`BagError` once
   it reaches the cut, so callers can report what came before. The same happens when
   a storage error (e.g. a damaged sqlite3 page) interrupts iteration.
 
@@ -23,11 +24,11 @@ names the bag and the problem.
 """
 from __future__ import annotations
 
-import bz2
 import logging
-import struct
+import os
+import tempfile
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -46,9 +47,10 @@ from rosbags.rosbag1 import WriterError as Ros1WriterError
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Ros2Writer
 from rosbags.rosbag2 import WriterError as Ros2WriterError
-from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
+from speed_sign_detector.bag_salvage import ROS1_MAGIC, SalvagedBag, normalize_msgtype, scan_file
 from speed_sign_detector.errors import BagError
 
 LOGGER = logging.getLogger(__name__)
@@ -60,20 +62,19 @@ COMPRESSED_IMAGE_MSGTYPE = 'sensor_msgs/msg/CompressedImage'
 #: Message types an image topic may have.
 IMAGE_MSGTYPES: tuple[str, ...] = (IMAGE_MSGTYPE, COMPRESSED_IMAGE_MSGTYPE)
 
-_MCAP_MAGIC = b'\x89MCAP0\r\n'
-_ROS1_MAGIC = b'#ROSBAG V2.0\n'
-
-
 def latched_qos() -> Qos:
     """QoS of a latched topic (reliable, transient local, depth 1), e.g. ``speed_limit``."""
     return Qos(QosHistory.KEEP_LAST, 1, QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL,
                QosTime(0, 0), QosTime(0, 0), QosLiveliness.AUTOMATIC, QosTime(0, 0), False)
 
 
-def normalize_msgtype(msgtype: str) -> str:
-    """``sensor_msgs/Image`` (ROS 1 name) -> ``sensor_msgs/msg/Image``."""
-    parts = msgtype.split('/')
-    return f'{parts[0]}/msg/{parts[1]}' if len(parts) == 2 else msgtype
+def is_ros1_bag_file(path: Path) -> bool:
+    """True when ``path`` is a file that starts like a ROS 1 bag, whatever its name."""
+    try:
+        with path.open('rb') as stream:
+            return stream.read(len(ROS1_MAGIC)) == ROS1_MAGIC
+    except OSError:
+        return False
 
 
 @dataclass(frozen=True)
@@ -125,25 +126,6 @@ def header_stamp_ns(message: Any, fallback_ns: int) -> int:
 
 
 # --------------------------------------------------------------------------- reading
-@dataclass
-class _SalvageConnection:
-    topic: str
-    msgtype: str
-    count: int = 0
-
-
-@dataclass
-class _Salvage:
-    """Messages recovered by a sequential scan of a file whose index or end is missing."""
-
-    reason: str
-    is_ros2: bool
-    typestore: Typestore
-    connections: dict[int, _SalvageConnection] = field(default_factory=dict)
-    records: list[tuple[int, int, bytes]] = field(default_factory=list)  # conn, time, raw
-    cut: str = ''   # why the scan stopped early ('' = reached a clean end)
-
-
 class BagReader:
     """Read a bag's topics and messages; use as a context manager.
 
@@ -163,7 +145,8 @@ class BagReader:
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         self._reader: AnyReader | None = None
-        self._salvage: _Salvage | None = None
+        self._salvage: SalvagedBag | None = None
+        self._alias_folder: tempfile.TemporaryDirectory[str] | None = None
         if not self.path.exists():
             raise BagError(f'bag {self.path} does not exist')
         try:
@@ -175,7 +158,7 @@ class BagReader:
             salvage_file = self._storage_file()
             if salvage_file is None:
                 raise BagError(f'cannot open bag {self.path}: {err}') from err
-            self._salvage = _scan_file(salvage_file, reason=str(err))
+            self._salvage = scan_file(salvage_file, reason=str(err))
             LOGGER.warning('bag %s could not be opened normally (%s); recovered %d complete '
                            'messages by scanning %s', self.path, err,
                            len(self._salvage.records), salvage_file.name)
@@ -323,7 +306,10 @@ class BagReader:
     # ------------------------------------------------------------------ helpers
     def _reader_path(self) -> Path:
         """What AnyReader should open: the directory, or the storage file of a directory
-        that lacks metadata.yaml (a recording that was never closed)."""
+        that lacks metadata.yaml (a recording that was never closed); a ROS 1 bag whose
+        name does not end in ``.bag`` (rosbags decides by the suffix) through an alias."""
+        if self.path.is_file() and self.path.suffix != '.bag' and is_ros1_bag_file(self.path):
+            return self._ros1_alias()
         if self.path.is_dir() and not (self.path / 'metadata.yaml').exists():
             storage = self._storage_file()
             if storage is not None:
@@ -332,10 +318,23 @@ class BagReader:
                            f'.mcap/.db3 file: not a ROS 2 bag')
         return self.path
 
+    def _ros1_alias(self) -> Path:
+        """A ``.bag`` symbolic link to this ROS 1 bag in a private temporary folder."""
+        self._alias_folder = tempfile.TemporaryDirectory(prefix='speed_sign_bag_')
+        alias = Path(self._alias_folder.name) / f'{self.path.name}.bag'
+        try:
+            os.symlink(self.path.resolve(), alias)
+        except OSError as err:
+            raise BagError(f'{self.path} is a ROS 1 bag but its name does not end in .bag, '
+                           f'and no alias could be made ({err}); rename it to '
+                           f'{self.path.name}.bag') from err
+        return alias
+
     def _storage_file(self) -> Path | None:
         """The single .mcap or .bag file a salvage scan can read, if any."""
         if self.path.is_file():
-            return self.path if self.path.suffix in ('.mcap', '.bag', '.db3') else None
+            return (self.path if self.path.suffix in ('.mcap', '.bag', '.db3')
+                    or is_ros1_bag_file(self.path) else None)
         files = sorted(self.path.glob('*.mcap')) + sorted(self.path.glob('*.db3'))
         return files[0] if len(files) == 1 else None
 
@@ -344,6 +343,9 @@ class BagReader:
         if self._reader is not None:
             self._reader.close()
             self._reader = None
+        if self._alias_folder is not None:
+            self._alias_folder.cleanup()
+            self._alias_folder = None
 
     def __enter__(self) -> BagReader:
         return self
@@ -351,208 +353,6 @@ class BagReader:
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
                  traceback: TracebackType | None) -> None:
         self.close()
-
-
-def _scan_file(path: Path, reason: str) -> _Salvage:
-    """Recover the complete messages of a truncated MCAP or ROS 1 file.
-
-    Raises:
-        BagError: the file is neither (e.g. a damaged sqlite3 database).
-    """
-    try:
-        data = path.read_bytes()
-    except OSError as err:
-        raise BagError(f'cannot read {path}: {err}') from err
-    if data.startswith(_MCAP_MAGIC):
-        salvage = _Salvage(reason, True, get_typestore(Stores.ROS2_JAZZY))
-        _scan_mcap(data, salvage)
-    elif data.startswith(_ROS1_MAGIC):
-        salvage = _Salvage(reason, False, get_typestore(Stores.ROS1_NOETIC))
-        _scan_ros1(data, salvage)
-    elif path.suffix == '.db3':
-        raise BagError(f'cannot open bag {path}: {reason} (a damaged or truncated sqlite3 '
-                       f'bag cannot be recovered; MCAP and ROS 1 recordings can)')
-    else:
-        raise BagError(f'cannot open bag {path}: {reason}')
-    if not salvage.connections:
-        raise BagError(f'bag {path} is truncated or damaged ({reason}) and no topic could '
-                       f'be recovered from it')
-    return salvage
-
-
-def _register(salvage: _Salvage, msgdef: str, msgtype: str) -> None:
-    """Add the types of a ``.msg`` definition to the salvage typestore (best effort)."""
-    if not msgdef:
-        return
-    try:
-        salvage.typestore.register(get_types_from_msg(msgdef, msgtype))
-    except Exception as err:  # noqa: BLE001 - keep the built-in definition then
-        LOGGER.debug('could not register type %s from the bag: %s', msgtype, err)
-
-
-def _scan_mcap(data: bytes, salvage: _Salvage) -> None:
-    """Walk MCAP records (into chunks) until the data ends or a record is cut."""
-    schemas: dict[int, tuple[str, str, str]] = {}
-
-    def walk(buffer: bytes, start: int, inside_chunk: bool) -> bool:
-        position = start
-        while position < len(buffer):
-            if position + 9 > len(buffer):
-                salvage.cut = f'record header cut at byte {position}'
-                return False
-            opcode = buffer[position]
-            (length,) = struct.unpack_from('<Q', buffer, position + 1)
-            body_start, body_end = position + 9, position + 9 + length
-            if body_end > len(buffer):
-                if opcode == 0x06 and not inside_chunk:
-                    walk_partial_chunk(buffer[body_start:])
-                salvage.cut = f'record 0x{opcode:02x} cut at byte {position}'
-                return False
-            body = buffer[body_start:body_end]
-            if opcode == 0x02:  # footer: clean end
-                return True
-            if opcode == 0x03:
-                handle_schema(body)
-            elif opcode == 0x04:
-                handle_channel(body)
-            elif opcode == 0x05:
-                channel_id, _sequence, log_time = struct.unpack_from('<HIQ', body, 0)
-                if channel_id in salvage.connections:
-                    salvage.connections[channel_id].count += 1
-                    salvage.records.append((channel_id, log_time, bytes(body[22:])))
-            elif opcode == 0x06 and not inside_chunk:
-                if not handle_chunk(body):
-                    return False
-            position = body_end
-        return True
-
-    def read_string(body: bytes, offset: int) -> tuple[str, int]:
-        (size,) = struct.unpack_from('<I', body, offset)
-        return body[offset + 4:offset + 4 + size].decode('utf-8'), offset + 4 + size
-
-    def handle_schema(body: bytes) -> None:
-        (schema_id,) = struct.unpack_from('<H', body, 0)
-        name, offset = read_string(body, 2)
-        encoding, offset = read_string(body, offset)
-        (size,) = struct.unpack_from('<I', body, offset)
-        schemas[schema_id] = (name, encoding,
-                              body[offset + 4:offset + 4 + size].decode('utf-8', 'replace'))
-
-    def handle_channel(body: bytes) -> None:
-        channel_id, schema_id = struct.unpack_from('<HH', body, 0)
-        topic, _ = read_string(body, 4)
-        name, encoding, text = schemas.get(schema_id, ('', '', ''))
-        if encoding == 'ros2msg':
-            _register(salvage, text, name)
-        salvage.connections[channel_id] = _SalvageConnection(topic, name)
-
-    def chunk_records(body: bytes) -> tuple[str, bytes]:
-        offset = 8 + 8 + 8 + 4
-        compression, offset = read_string(body, offset)
-        (size,) = struct.unpack_from('<Q', body, offset)
-        return compression, body[offset + 8:offset + 8 + size]
-
-    def handle_chunk(body: bytes) -> bool:
-        compression, records = chunk_records(body)
-        try:
-            if compression == 'zstd':
-                from backports import zstd
-                records = zstd.decompress(records)
-            elif compression == 'lz4':
-                import lz4.frame
-                records = lz4.frame.decompress(records)
-            elif compression:
-                salvage.cut = f'unsupported chunk compression {compression!r}'
-                return False
-        except Exception as err:  # noqa: BLE001 - a damaged chunk ends the scan
-            salvage.cut = f'chunk does not decompress: {err}'
-            return False
-        return walk(records, 0, True)
-
-    def walk_partial_chunk(body: bytes) -> None:
-        try:
-            compression, records = chunk_records(body)
-        except (struct.error, UnicodeDecodeError):
-            return
-        if not compression:
-            walk(records, 0, True)
-
-    if not walk(data, len(_MCAP_MAGIC), False) and not salvage.cut:
-        salvage.cut = 'data ends early'
-    elif not salvage.cut:
-        salvage.cut = 'no footer'
-
-
-def _scan_ros1(data: bytes, salvage: _Salvage) -> None:
-    """Walk ROS 1 records (into chunks) until the data ends or a record is cut."""
-
-    def parse_header(buffer: bytes) -> dict[str, bytes]:
-        fields: dict[str, bytes] = {}
-        position = 0
-        while position + 4 <= len(buffer):
-            (size,) = struct.unpack_from('<I', buffer, position)
-            name, _, value = buffer[position + 4:position + 4 + size].partition(b'=')
-            fields[name.decode('ascii', 'replace')] = value
-            position += 4 + size
-        return fields
-
-    def walk(buffer: bytes, start: int) -> bool:
-        position = start
-        while position < len(buffer):
-            if position + 4 > len(buffer):
-                salvage.cut = f'record cut at byte {position}'
-                return False
-            (header_size,) = struct.unpack_from('<I', buffer, position)
-            data_at = position + 4 + header_size
-            if data_at + 4 > len(buffer):
-                salvage.cut = f'record header cut at byte {position}'
-                return False
-            header = parse_header(buffer[position + 4:data_at])
-            (data_size,) = struct.unpack_from('<I', buffer, data_at)
-            end = data_at + 4 + data_size
-            opcode = header.get('op', b'\x00')[0]
-            if end > len(buffer):
-                if opcode == 0x05 and header.get('compression', b'none') == b'none':
-                    walk(buffer[data_at + 4:], 0)   # the complete records of a cut chunk
-                salvage.cut = f'record data cut at byte {position}'
-                return False
-            body = buffer[data_at + 4:end]
-            if opcode == 0x05:  # chunk
-                compression = header.get('compression', b'none').decode()
-                try:
-                    if compression == 'bz2':
-                        body = bz2.decompress(body)
-                    elif compression == 'lz4':
-                        import lz4.frame
-                        body = lz4.frame.decompress(body)
-                    elif compression != 'none':
-                        salvage.cut = f'unsupported chunk compression {compression!r}'
-                        return False
-                except Exception as err:  # noqa: BLE001 - a damaged chunk ends the scan
-                    salvage.cut = f'chunk does not decompress: {err}'
-                    return False
-                if not walk(body, 0):
-                    return False
-            elif opcode == 0x07:  # connection
-                (connection_id,) = struct.unpack_from('<I', header['conn'])
-                details = parse_header(body)
-                msgtype = normalize_msgtype(details.get('type', b'').decode())
-                _register(salvage, details.get('message_definition', b'').decode(
-                    'utf-8', 'replace'), msgtype)
-                salvage.connections.setdefault(connection_id, _SalvageConnection(
-                    header.get('topic', b'').decode(), msgtype))
-            elif opcode == 0x02:  # message data
-                (connection_id,) = struct.unpack_from('<I', header['conn'])
-                sec, nsec = struct.unpack_from('<II', header['time'])
-                if connection_id in salvage.connections:
-                    salvage.connections[connection_id].count += 1
-                    salvage.records.append((connection_id, sec * 1_000_000_000 + nsec,
-                                            bytes(body)))
-            position = end
-        return True
-
-    if walk(data, len(_ROS1_MAGIC)) and not salvage.cut:
-        salvage.cut = 'no index'
 
 
 # --------------------------------------------------------------------------- writing
@@ -675,4 +475,5 @@ def read_all(path: str | Path, topic: str) -> list[BagMessage]:
 
 
 __all__ = ['BAG_FORMATS', 'IMAGE_MSGTYPES', 'BagMessage', 'BagReader', 'BagWriter',
-           'TopicSummary', 'header_stamp_ns', 'latched_qos', 'normalize_msgtype', 'read_all']
+           'TopicSummary', 'header_stamp_ns', 'is_ros1_bag_file', 'latched_qos',
+           'normalize_msgtype', 'read_all']
