@@ -306,28 +306,32 @@ class BagReader:
     # ------------------------------------------------------------------ helpers
     def _reader_path(self) -> Path:
         """What AnyReader should open: the directory, or the storage file of a directory
-        that lacks metadata.yaml (a recording that was never closed); a ROS 1 bag whose
-        name does not end in ``.bag`` (rosbags decides by the suffix) through an alias."""
+        that lacks metadata.yaml (a recording that was never closed). rosbags takes a
+        path ending in ``.bag`` for ROS 1 and any other for ROS 2, so a ROS 1 file named
+        otherwise, or a ROS 2 folder named ``*.bag``, is opened through an alias."""
         if self.path.is_file() and self.path.suffix != '.bag' and is_ros1_bag_file(self.path):
-            return self._ros1_alias()
-        if self.path.is_dir() and not (self.path / 'metadata.yaml').exists():
-            storage = self._storage_file()
-            if storage is not None:
-                return storage
-            raise BagError(f'{self.path} is a directory without metadata.yaml or a '
-                           f'.mcap/.db3 file: not a ROS 2 bag')
+            return self._alias(f'{self.path.name}.bag')
+        if self.path.is_dir():
+            if not (self.path / 'metadata.yaml').exists():
+                storage = self._storage_file()
+                if storage is not None:
+                    return storage
+                raise BagError(f'{self.path} is a directory without metadata.yaml or a '
+                               f'.mcap/.db3 file: not a ROS 2 bag')
+            if self.path.suffix == '.bag':
+                return self._alias(f'{self.path.stem}_ros2')
         return self.path
 
-    def _ros1_alias(self) -> Path:
-        """A ``.bag`` symbolic link to this ROS 1 bag in a private temporary folder."""
+    def _alias(self, name: str) -> Path:
+        """A symbolic link called ``name`` to this bag, in a private temporary folder."""
         self._alias_folder = tempfile.TemporaryDirectory(prefix='speed_sign_bag_')
-        alias = Path(self._alias_folder.name) / f'{self.path.name}.bag'
+        alias = Path(self._alias_folder.name) / name
         try:
             os.symlink(self.path.resolve(), alias)
         except OSError as err:
-            raise BagError(f'{self.path} is a ROS 1 bag but its name does not end in .bag, '
-                           f'and no alias could be made ({err}); rename it to '
-                           f'{self.path.name}.bag') from err
+            raise BagError(f'cannot open {self.path}: its name does not match its format '
+                           f'(ROS 1 bags end in .bag, ROS 2 bag folders do not) and no alias '
+                           f'could be made ({err}); rename it') from err
         return alias
 
     def _storage_file(self) -> Path | None:
