@@ -7,9 +7,9 @@ Example::
 
 A ROS 1 bag is a file whose name ends in ``.bag`` (rosbags tells the formats apart by
 it): with ``--format ros1`` the suffix is added when it is missing. A ROS 2 bag is a
-folder. The output paths are checked before the
-first frame is drawn; missing parent folders are created. Ctrl-C stops the drive with
-exit status 130 and leaves a valid bag of the frames written so far.
+folder. The output paths are checked before the first frame is drawn; missing parent
+folders are created. Ctrl-C stops the drive with exit status 130 and leaves a valid bag
+of the frames written so far.
 
 The scene (road, signs, look-alikes, distractors, lighting, blur, noise) is described
 in :mod:`speed_sign_detector.synthetic`, the truth format in
