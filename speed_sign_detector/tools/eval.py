@@ -12,8 +12,10 @@ Subcommands (each in its own module, registered here):
   resumable, the per-sign metrics summed (:mod:`speed_sign_detector.tools.fleet`).
 
 With ``--json`` the last line on stdout is ONE JSON object; progress and logs go to
-stderr. Exit status: 0 on success, 1 when the evaluation failed with an error, 2 for
-bad command-line usage.
+stderr. Exit status: 0 on success; 1 when the evaluation failed with an error, or
+finished but had to skip input (unreadable image files, a truncated bag: the metrics of
+the rest are still printed); 2 for bad command-line usage; 130 after Ctrl-C (the metrics
+of what was done are printed, marked ``"partial": true``).
 """
 from __future__ import annotations
 
@@ -21,6 +23,7 @@ import argparse
 import logging
 import sys
 
+from speed_sign_detector import __version__
 from speed_sign_detector.errors import SpeedSignError
 from speed_sign_detector.tools import eval_bag, eval_crops, eval_scenes, fleet
 
@@ -32,6 +35,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog='speed_sign_eval', description='Evaluate speed-limit sign detection and '
         'recognition on scenes, crops, bags or many bags (fleet).')
+    parser.add_argument('--version', action='version', version=f'%(prog)s {__version__}')
     parser.add_argument('-v', '--verbose', action='store_true', help='debug logging on stderr')
     subparsers = parser.add_subparsers(dest='command', required=True,
                                        metavar='{scenes,crops,bag,fleet}')
@@ -52,7 +56,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f'speed_sign_eval {args.command}: error: {err}', file=sys.stderr)
         return 1
     except KeyboardInterrupt:
-        print('speed_sign_eval: interrupted', file=sys.stderr)
+        print(f'speed_sign_eval {args.command}: interrupted', file=sys.stderr)
         return 130
 
 

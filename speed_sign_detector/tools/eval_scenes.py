@@ -16,14 +16,16 @@ conversion, detection, scoring), ``detector_ms_per_frame`` (``Detector.detect`` 
 ``radius_ratio_median`` (candidate radius / box radius over the found signs: the
 detector reports the radius of the edge that voted, mostly the inner edge of the ring);
 with classification: ``recognized``, ``recognition_recall``, ``false_limits``,
-``false_limits_per_frame``, ``classifier_ms_per_frame``.
+``false_limits_per_frame``, ``classifier_ms_per_frame``. Run state: ``frames_planned``,
+``partial`` (true after Ctrl-C: the metrics cover the ``frames`` done, exit status 130),
+``unreadable`` (image files that could not be read, ``{file, reason}``: skipped, the
+rest evaluated, exit status 1). Rates over no frame or no sign are 0 (null for times).
 """
 from __future__ import annotations
 
 import argparse
 import dataclasses
 import json
-import logging
 import math
 import statistics
 import sys
@@ -32,15 +34,22 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
-
 from speed_sign_detector.config import PipelineConfig, load_yaml
 from speed_sign_detector.detection.candidates import Candidate
 from speed_sign_detector.detection.detector import Detector
 from speed_sign_detector.errors import TruthFileError
 from speed_sign_detector.recognition.classifier import Classification, Classifier
+from speed_sign_detector.tools.image_files import (
+    UnreadableImage,
+    UnreadableImageError,
+    read_gray_image,
+)
+from speed_sign_detector.tools.run_control import (
+    EXIT_INTERRUPTED,
+    ItemProgress,
+    stop_on_interrupt,
+)
 
-LOGGER = logging.getLogger(__name__)
 
 #: GTSDB class id -> speed limit in km/h (class 6, end of 80, is not a limit).
 SPEED_LIMIT_CLASSES: dict[int, int] = {0: 20, 1: 30, 2: 50, 3: 60, 4: 70, 5: 80, 7: 100,
@@ -48,6 +57,25 @@ SPEED_LIMIT_CLASSES: dict[int, int] = {0: 20, 1: 30, 2: 50, 3: 60, 4: 70, 5: 80,
 #: Radius ranges (pixels) of the per-size recall figures.
 SIZE_BINS_PX: tuple[tuple[float, float], ...] = ((0.0, 8.0), (8.0, 12.0), (12.0, 20.0),
                                                  (20.0, 1000.0))
+#: What ``scenes --help`` says (the module docstring is for the API documentation).
+HELP_DESCRIPTION = """\
+Detection and single-frame recognition metrics on GTSDB-format scenes.
+
+DIR holds images/ (JPEG, PNG or PPM) and a GTSDB gt.txt (file;x1;y1;x2;y2;classId per
+sign, box corners in pixels). Every image goes through the detector, then (unless
+--no-classify) the classifier, one frame at a time (no tracking).
+
+A speed-limit sign (classes 0-5, 7, 8) counts as found when one of the frame's top-N
+candidates has its centre within max(3 px, 0.35 r) of the box centre, r = (w + h) / 4;
+as recognized when such a candidate is also read as its limit. A false limit is a
+candidate read as a limit that lies on no speed-limit sign of that value.
+
+Output: a table, or with --json one JSON object as the last stdout line (frames,
+signs, found, candidate_recall, recall_by_size, ms_per_frame, detector_ms_per_frame,
+backend, ...; with classification recognized, recognition_recall, false_limits,
+false_limits_per_frame). Unreadable images are skipped and listed ("unreadable"),
+exit status 1. Ctrl-C reports the frames done, marked "partial", exit status 130.
+"""
 
 
 @dataclass(frozen=True)
@@ -140,12 +168,17 @@ def is_found(sign: SceneSign, candidates: Sequence[Candidate]) -> bool:
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``scenes`` subcommand."""
-    parser = subparsers.add_parser('scenes', help='detection metrics on GTSDB-format scenes',
-                                   description=__doc__,
+    parser = subparsers.add_parser('scenes', help='detection and recognition metrics on '
+                                   'GTSDB-format scenes (DIR/images, DIR/gt.txt)',
+                                   description=HELP_DESCRIPTION,
                                    formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('directory', type=Path, help='folder with images/ and gt.txt')
-    parser.add_argument('--json', action='store_true', help='print one JSON object')
-    parser.add_argument('--backend', choices=('auto', 'gl', 'numpy'), default='auto')
+    parser.add_argument('directory', type=Path, metavar='DIR',
+                        help='folder with images/ and gt.txt')
+    parser.add_argument('--json', action='store_true', help='print one JSON object as the '
+                        'last line on stdout (instead of the table)')
+    parser.add_argument('--backend', choices=('auto', 'gl', 'numpy'), default='auto',
+                        help='radial-symmetry voting: gl (OpenGL, EGL), numpy (the '
+                        'reference), auto (gl when a context can be made; default)')
     parser.add_argument('--config', type=Path, default=None,
                         help='ROS 2 parameter YAML file of the node')
     parser.add_argument('--no-classify', action='store_true',
@@ -153,7 +186,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument('--max-candidates', type=int, default=None,
                         help='top-N candidates per frame (default: the config, 7)')
     parser.add_argument('--limit', type=int, default=0,
-                        help='evaluate only the first N images (0 = all)')
+                        help='evaluate only the first N images (default 0 = all)')
+    parser.add_argument('-q', '--quiet', action='store_true', help='no progress on stderr')
     parser.set_defaults(run=run)
 
 
@@ -181,12 +215,22 @@ def run(args: argparse.Namespace) -> int:
     detector_s = classifier_s = 0.0
     recognized = false_limits = 0
     radius_ratios: list[float] = []
+    unreadable: list[UnreadableImage] = []
+    done = 0
     start = time.perf_counter()
-    with Detector(config, backend=args.backend) as detector:
-        for index, name in enumerate(files):
-            gray = cv2.imread(str(image_dir / name), cv2.IMREAD_GRAYSCALE)
-            if gray is None:
-                raise TruthFileError(f'cannot read image {image_dir / name}')
+    with Detector(config, backend=args.backend) as detector, \
+            stop_on_interrupt('speed_sign_eval scenes') as stop:
+        bar = ItemProgress(len(files), 'frames', 'frame', enabled=not args.quiet)
+        for name in files:
+            if stop.requested:
+                break
+            done += 1
+            bar.update()
+            try:
+                gray = read_gray_image(image_dir / name)
+            except UnreadableImageError as err:
+                unreadable.append(UnreadableImage(f'images/{name}', str(err)))
+                continue
             tick = time.perf_counter()
             candidates = detector.detect(gray)
             detector_s += time.perf_counter() - tick
@@ -214,19 +258,22 @@ def run(args: argparse.Namespace) -> int:
                     if low <= sign.radius_px < high:
                         bins_total[bin_index] += 1
                         bins_found[bin_index] += hit
-            if (index + 1) % 50 == 0:
-                LOGGER.info('%d/%d frames, recall so far %.3f', index + 1, len(files),
-                            found / max(signs, 1))
+        bar.close()
         backend, renderer = detector.backend_name, detector.renderer
         vote_method = detector.vote_method
     elapsed_s = time.perf_counter() - start
+    frames = done - len(unreadable)
+    per_frame_ms = 1e3 / frames if frames else 0.0
     result = {
-        'frames': len(files),
+        'frames': frames,
+        'frames_planned': len(files),
+        'partial': done < len(files),
+        'unreadable': [dataclasses.asdict(item) for item in unreadable],
         'signs': signs,
         'found': found,
         'candidate_recall': found / signs if signs else 0.0,
-        'ms_per_frame': 1e3 * elapsed_s / len(files),
-        'detector_ms_per_frame': 1e3 * detector_s / len(files),
+        'ms_per_frame': elapsed_s * per_frame_ms,
+        'detector_ms_per_frame': detector_s * per_frame_ms,
         'backend': backend,
         'renderer': renderer,
         'vote_method': vote_method,
@@ -241,14 +288,19 @@ def run(args: argparse.Namespace) -> int:
             'recognized': recognized,
             'recognition_recall': recognized / signs if signs else 0.0,
             'false_limits': false_limits,
-            'false_limits_per_frame': false_limits / len(files),
-            'classifier_ms_per_frame': 1e3 * classifier_s / len(files),
+            'false_limits_per_frame': false_limits / frames if frames else 0.0,
+            'classifier_ms_per_frame': classifier_s * per_frame_ms,
         })
     if args.json:
         print(json.dumps(result), file=sys.stdout)
     else:
         _print_table(result)
-    return 0
+    if unreadable:
+        print(f'speed_sign_eval scenes: {len(unreadable)} image(s) could not be read and were '
+              f"skipped (listed under 'unreadable')", file=sys.stderr)
+    if result['partial']:
+        return EXIT_INTERRUPTED
+    return 1 if unreadable else 0
 
 
 def _print_table(result: dict) -> None:
@@ -273,3 +325,10 @@ def _print_table(result: dict) -> None:
     for name, item in result['recall_by_size'].items():
         recall = '-' if item['recall'] is None else f"{item['recall']:.3f}"
         print(f"{'recall, radius ' + name:<28}{recall:>12}  ({item['signs']} signs)")
+    if result['unreadable']:
+        print(f"UNREADABLE {len(result['unreadable'])} images (skipped):")
+        for item in result['unreadable']:
+            print(f"  {item['file']}: {item['reason']}")
+    if result['partial']:
+        print(f"PARTIAL: interrupted after {result['frames'] + len(result['unreadable'])} of "
+              f"{result['frames_planned']} images")

@@ -33,6 +33,7 @@ from collections import deque
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
+from speed_sign_detector import __version__
 from speed_sign_detector.ros.messages import pointcloud_to_array
 
 #: Diagnostics values copied into the snapshot (key in the node's status -> snapshot field).
@@ -235,6 +236,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog='speed_sign_monitor',
         description='Show the state of a running speed_sign_detector node.')
+    parser.add_argument('--version', action='version', version=f'%(prog)s {__version__}')
     parser.add_argument('--once', action='store_true',
                         help='print one snapshot (after hearing every topic, or at the '
                         'timeout) and exit')

@@ -28,6 +28,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from speed_sign_detector import __version__
 from speed_sign_detector.bag_io import (
     COMPRESSED_IMAGE_MSGTYPE,
     BagMessage,
@@ -43,6 +44,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog='speed_sign_replay',
         description='Publish the image topic of a ROS 2 (MCAP/sqlite3) or ROS 1 bag with '
         'the recorded timing.')
+    parser.add_argument('--version', action='version', version=f'%(prog)s {__version__}')
     parser.add_argument('bag', type=Path, help='bag directory, .mcap/.db3 file or .bag file')
     parser.add_argument('--topic', help='image topic of the bag (needed when it has several)')
     parser.add_argument('--publish-as', help='publish under this topic name instead of the '
@@ -56,7 +58,8 @@ def build_parser() -> argparse.ArgumentParser:
                         'message published late shows as latency, not as a stamp gap)')
     parser.add_argument('--wait', type=float, default=5.0,
                         help='seconds to wait for a subscriber before playing (default 5)')
-    parser.add_argument('--depth', type=int, default=5, help='publisher queue depth')
+    parser.add_argument('--depth', type=int, default=5,
+                        help='publisher queue depth (default 5)')
     parser.add_argument('--best-effort', action='store_true',
                         help='best-effort QoS (sensor data) instead of reliable')
     parser.add_argument('-q', '--quiet', action='store_true', help='no progress on stderr')
