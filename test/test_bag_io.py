@@ -149,3 +149,33 @@ def test_latched_topic_keeps_transient_local_qos(tmp_path: Path) -> None:
     with BagReader(path) as bag:
         (item,) = bag.messages('/speed_limit')
     assert item.message.data == 50
+
+
+def test_bags_named_against_their_format_are_read_by_content(tmp_path: Path) -> None:
+    """rosbags tells ROS 1 from ROS 2 by the name (.bag); BagReader by the content: a
+    ROS 1 bag without .bag (as speed_sign_synth once wrote them), a ROS 2 folder named
+    *.bag, and a truncated ROS 1 bag without .bag (salvage mode)."""
+    frames = list(SyntheticDrive(CONFIG))
+    ros1 = tmp_path / 'ros1_drive.bag'
+    write_drive(frames, ros1, 'ros1')
+    unnamed = ros1.rename(tmp_path / 'ros1_drive')
+    ros2 = tmp_path / 'ros2_drive'
+    write_drive(frames, ros2, 'mcap')
+    named_bag = ros2.rename(tmp_path / 'ros2_drive.bag')
+    for path, is_ros2 in ((unnamed, False), (named_bag, True)):
+        with BagReader(path) as bag:
+            assert bag.is_ros2 == is_ros2 and bag.salvage_reason is None
+            items = list(bag.messages(bag.image_topic().name))
+        assert [header_stamp_ns(item.message, 0) for item in items] == [
+            CONFIG.stamp_ns(index) for index in range(FRAMES)]
+        reference = frames[2].bgr.astype(np.float32) @ np.float32([0.114, 0.587, 0.299])
+        assert np.abs(message_to_gray(items[2].message) - reference).mean() < 1.0
+    cut = tmp_path / 'ros1_cut'
+    cut.write_bytes(unnamed.read_bytes()[:unnamed.stat().st_size * 2 // 3])
+    with BagReader(cut) as bag:
+        assert bag.salvage_reason is not None and not bag.is_ros2
+        read = []
+        with pytest.raises(BagError, match='truncated'):
+            for item in bag.messages(bag.image_topic().name):
+                read.append(item)
+    assert 0 < len(read) < FRAMES
