@@ -1,5 +1,5 @@
 # Fresh-machine entry points. Everything runs inside a virtualenv in .venv/ that the
-# first target creates (Python >= 3.10 with the venv module; no ROS install needed:
+# first target creates (Python >= 3.11 with the venv module; no ROS install needed:
 # rclpy and the message packages come from PyPI).
 PYTHON ?= python3
 VENV ?= .venv
