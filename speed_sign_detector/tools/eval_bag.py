@@ -9,17 +9,27 @@ Example::
   only one, else named with ``--topic``.
 - Each frame goes through :class:`speed_sign_detector.pipeline.Pipeline` with its
   header stamp (the record time when the stamp is zero), not at the recorded rate.
-- ``--out``: a ROS 2 MCAP bag with the node's outputs at the input stamps:
-  ``/candidates`` (PointCloud2, every frame), ``/speed_limit`` (UInt16, transient local,
-  on the first frame and whenever the active limit changes, like the node), and with
-  ``--debug-images`` ``/debug_image`` (bgr8).
-- ``--contact-sheet PNG``: a picture of annotated frames (detections, labels, the
-  active limit): every frame where a limit was recognized, filled up with evenly
-  spaced frames (at most :data:`CONTACT_SHEET_FRAMES`).
+- ``--out``: a ROS 2 MCAP bag with the node's outputs at the input stamps
+  (:mod:`speed_sign_detector.tools.results_bag`): ``/candidates`` (PointCloud2, every
+  frame), ``/speed_limit`` (UInt16, transient local, on the first frame and whenever the
+  active limit changes, like the node); with ``--debug-images`` ``/debug_image`` (bgr8);
+  with ``--with-images`` the input images (``/image/compressed``) and Foxglove
+  annotations of the detections (``/image/annotations``).
+- ``--contact-sheet PNG``: the drive at a glance, tiles chosen around the limit changes
+  (:mod:`speed_sign_detector.tools.contact_sheet`).
+- Output paths are checked, and their missing folders created, before the first frame.
+- Times are reported as seconds since the first processed frame (``time_s``;
+  ``start_stamp_s`` is that frame's stamp).
 - ``--truth``: per-sign metrics against a truth file (:mod:`speed_sign_detector.truth`):
 
   ``signs``
-      speed-limit signs (truth tracks with ``limit_kmh > 0``) seen in the processed part.
+      speed-limit signs (truth tracks with ``limit_kmh > 0``) seen in the processed part,
+      less the ``cut_signs``.
+  ``cut_signs``
+      signs cut off by a truncation or by Ctrl-C: still in view (or within ``--grace``)
+      at the last processed frame and not recognized by then. Reported as ``cut`` in
+      ``per_sign`` and left out of ``signs`` and ``recall``: nobody knows whether they
+      would have been recognized. A complete run has none.
   ``recognized``
       signs whose value was recognized (a track of the pipeline newly recognized that
       limit) while the sign was visible or within ``--grace`` seconds after it left.
@@ -49,7 +59,8 @@ Example::
 
 A truncated or damaged bag ends the run with a non-zero exit status after the frames
 before the damage were processed, reported (the JSON line is still printed) and
-written to ``--out``.
+written to ``--out``. Ctrl-C does the same for the frames processed so far, with
+``"partial": true`` and exit status 130 (``frames`` of ``frames_planned``).
 
 From Python, :func:`evaluate_bag` runs one bag and returns a :class:`BagEvaluation`
 whose ``summary`` is exactly the object ``--json`` prints (:func:`summary_json`). It can
@@ -71,10 +82,17 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from speed_sign_detector.bag_io import BagReader, BagWriter, header_stamp_ns
+from speed_sign_detector.bag_io import BagReader, header_stamp_ns
 from speed_sign_detector.config import PipelineConfig, load_yaml
-from speed_sign_detector.errors import BagError, ImageConversionError, SpeedSignError
+from speed_sign_detector.errors import ImageConversionError, SpeedSignError
 from speed_sign_detector.recognition.classifier import LABEL_END_OF_LIMIT
+from speed_sign_detector.tools.output_paths import prepare_output_bag, prepare_output_file
+from speed_sign_detector.tools.run_control import (
+    EXIT_INTERRUPTED,
+    ItemProgress,
+    StopRequest,
+    stop_on_interrupt,
+)
 from speed_sign_detector.truth import TruthTrack, group_tracks, read_truth
 
 if TYPE_CHECKING:
@@ -84,10 +102,8 @@ if TYPE_CHECKING:
 END_OF_LIMIT_PREFIX = 'end_of_limit'
 #: Default grace after a sign left the image within which recognizing it still counts, s.
 DEFAULT_GRACE_S = 1.0
-#: Most frames on a contact sheet.
-CONTACT_SHEET_FRAMES = 12
-OUTPUT_TOPICS = {'candidates': '/candidates', 'speed_limit': '/speed_limit',
-                 'debug_image': '/debug_image'}
+#: File endings a contact sheet may have.
+CONTACT_SHEET_SUFFIXES: tuple[str, ...] = ('.png', '.jpg', '.jpeg')
 #: Per-sign counts of a drive's summary that add up over drives (with ``drive_time_s``).
 DRIVE_COUNT_KEYS: tuple[str, ...] = (
     'signs', 'recognized', 'wrong_limits', 'lookalike_limits', 'misread_limits',
@@ -132,6 +148,7 @@ class SignOutcome:
     recognized_after_s: float | None = None
     radius_at_recognition_px: float | None = None
     wrong_values: list[int] = field(default_factory=list)
+    cut: bool = False
 
 
 @dataclass(frozen=True)
@@ -151,6 +168,7 @@ class DriveScore:
     wrong_end_of_limits: int
     outcomes: tuple[SignOutcome, ...]
     drive_time_s: float = 0.0
+    cut_signs: int = 0
 
 
 @dataclass(frozen=True)
@@ -225,8 +243,8 @@ def sum_drive_metrics(summaries: Iterable[Mapping[str, Any]]) -> dict[str, Any] 
 
 
 def score_drive(tracks: Sequence[TruthTrack], events: Sequence[LimitEvent],
-                frame_stamps_s: Sequence[float], grace_s: float = DEFAULT_GRACE_S
-                ) -> DriveScore:
+                frame_stamps_s: Sequence[float], grace_s: float = DEFAULT_GRACE_S,
+                stopped_early: bool = False) -> DriveScore:
     """Match the pipeline's limit recognitions to the truth signs.
 
     Args:
@@ -236,6 +254,11 @@ def score_drive(tracks: Sequence[TruthTrack], events: Sequence[LimitEvent],
         frame_stamps_s: stamps of the processed frames, seconds (ascending); truth signs
             that first appear after the last processed frame are not counted.
         grace_s: a recognition up to this long after a sign's last visible frame counts.
+        stopped_early: the frames end before the recording does (a truncated bag, Ctrl-C):
+            signs not recognized whose time to be recognized (visible, then ``grace_s``)
+            reaches past the last processed frame are cut (``SignOutcome.cut``), counted
+            in ``cut_signs`` and left out of ``signs``, ``recall`` and the end-of-limit
+            counts.
 
     Returns:
         The metrics; ``recall`` is None when there is no speed-limit sign.
@@ -287,9 +310,15 @@ def score_drive(tracks: Sequence[TruthTrack], events: Sequence[LimitEvent],
             outcomes[nearest.track_id].wrong_values.append(event.limit_kmh)
         else:
             phantom += 1
-    limit_outcomes = [outcome for outcome in outcomes.values() if outcome.limit_kmh > 0]
+    if stopped_early:
+        for track in seen:
+            outcome = outcomes[track.track_id]
+            outcome.cut = (not outcome.recognized and (track.is_limit or _is_end_of_limit(track))
+                           and track.last_stamp_s + grace_s > last_stamp + tolerance_s)
+    limit_outcomes = [outcome for outcome in outcomes.values()
+                      if outcome.limit_kmh > 0 and not outcome.cut]
     end_outcomes = [outcome for outcome in outcomes.values()
-                    if outcome.kind.startswith(END_OF_LIMIT_PREFIX)]
+                    if outcome.kind.startswith(END_OF_LIMIT_PREFIX) and not outcome.cut]
     recognized = sum(outcome.recognized for outcome in limit_outcomes)
     wrong = lookalike + misread + phantom
     drive_time_s = last_stamp - first_stamp + period_s if stamps.size else 0.0
@@ -302,7 +331,8 @@ def score_drive(tracks: Sequence[TruthTrack], events: Sequence[LimitEvent],
         end_of_limit_recognized=sum(outcome.recognized for outcome in end_outcomes),
         wrong_end_of_limits=wrong_ends,
         outcomes=tuple(sorted(outcomes.values(), key=lambda outcome: outcome.first_s)),
-        drive_time_s=drive_time_s)
+        drive_time_s=drive_time_s,
+        cut_signs=sum(outcome.cut and outcome.limit_kmh > 0 for outcome in outcomes.values()))
 
 
 def _is_end_of_limit(track: TruthTrack) -> bool:
@@ -343,115 +373,19 @@ def new_limit_events(result: Any, recognized_track_ids: set[int]) -> list[LimitE
     return events
 
 
-class _Progress:
-    """A one-line progress bar on stderr, drawn only when stderr is a terminal."""
-
-    def __init__(self, total: int) -> None:
-        self.total = max(total, 0)
-        self.enabled = sys.stderr.isatty()
-        self._last_draw = 0.0
-
-    def update(self, done: int, fps: float) -> None:
-        now = time.monotonic()
-        if not self.enabled or (now - self._last_draw < 0.2 and done != self.total):
-            return
-        self._last_draw = now
-        if self.total:
-            filled = int(30 * min(done, self.total) / self.total)
-            bar = '#' * filled + '.' * (30 - filled)
-            text = f'\r[{bar}] {done}/{self.total} frames {fps:5.1f} fps'
-        else:
-            text = f'\r{done} frames {fps:5.1f} fps'
-        print(text, end='', file=sys.stderr, flush=True)
-
-    def finish(self) -> None:
-        if self.enabled:
-            print(file=sys.stderr)
-
-
-class _ResultWriter:
-    """The node's output topics into a ROS 2 MCAP bag."""
-
-    def __init__(self, path: Path, debug_images: bool) -> None:
-        from speed_sign_detector.ros import messages
-
-        self._messages = messages
-        self.writer = BagWriter(path, 'mcap')
-        self.debug_images = debug_images
-        self.writer.add_topic(OUTPUT_TOPICS['candidates'], 'sensor_msgs/msg/PointCloud2')
-        self.writer.add_topic(OUTPUT_TOPICS['speed_limit'], 'std_msgs/msg/UInt16', latched=True)
-        if debug_images:
-            self.writer.add_topic(OUTPUT_TOPICS['debug_image'], 'sensor_msgs/msg/Image')
-        self._published_limit: int | None = None
-
-    def write(self, stamp_ns: int, frame_id: str, gray: np.ndarray, result: Any) -> None:
-        writer, messages = self.writer, self._messages
-        header = writer.header(stamp_ns, frame_id)
-        writer.write(OUTPUT_TOPICS['candidates'], stamp_ns, messages.candidates_message(
-            result, header, pointcloud_class=writer.message_class('sensor_msgs/msg/PointCloud2'),
-            pointfield_class=writer.message_class('sensor_msgs/msg/PointField')))
-        if result.active_limit_kmh != self._published_limit:
-            writer.write(OUTPUT_TOPICS['speed_limit'], stamp_ns, messages.speed_limit_message(
-                result.active_limit_kmh, uint16_class=writer.message_class('std_msgs/msg/UInt16')))
-            self._published_limit = result.active_limit_kmh
-        if self.debug_images:
-            writer.write(OUTPUT_TOPICS['debug_image'], stamp_ns, messages.debug_image_message(
-                gray, result, header, image_class=writer.message_class('sensor_msgs/msg/Image')))
-
-    def close(self) -> None:
-        self.writer.close()
-
-
-class _ContactSheet:
-    """Collects annotated frames: those with a recognition, and evenly spaced others."""
-
-    def __init__(self, path: Path, total_frames: int) -> None:
-        self.path = path
-        self.stride = max(1, total_frames // (CONTACT_SHEET_FRAMES // 2 or 1))
-        self.event_frames: list[tuple[int, np.ndarray]] = []
-        self.spaced_frames: list[tuple[int, np.ndarray]] = []
-
-    def offer(self, index: int, gray: np.ndarray, result: Any, has_event: bool) -> None:
-        from speed_sign_detector.visualization import draw_frame_result
-
-        if has_event and len(self.event_frames) < CONTACT_SHEET_FRAMES:
-            self.event_frames.append((index, draw_frame_result(gray, result)))
-        elif index % self.stride == self.stride // 2:
-            self.spaced_frames.append((index, draw_frame_result(gray, result)))
-
-    def write(self) -> None:
-        import cv2
-
-        from speed_sign_detector.visualization import contact_sheet
-
-        room = max(0, CONTACT_SHEET_FRAMES - len(self.event_frames))
-        spaced = self.spaced_frames
-        if len(spaced) > room:
-            picks = np.linspace(0, len(spaced) - 1, room).round().astype(int) if room else []
-            spaced = [spaced[pick] for pick in picks]
-        frames = sorted(self.event_frames + spaced, key=lambda item: item[0])
-        if not frames:
-            return
-        try:
-            ok = cv2.imwrite(str(self.path), contact_sheet([image for _, image in frames]))
-        except cv2.error as err:
-            raise BagError(f'cannot write contact sheet {self.path}: {err}') from err
-        if not ok:
-            raise BagError(f'cannot write contact sheet {self.path} (is it a .png path in a '
-                           f'writable folder?)')
-
-
 def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | None = None,
                  out_path: Path | None = None, debug_images: bool = False,
                  config: PipelineConfig | None = None, grace_s: float = DEFAULT_GRACE_S,
                  progress: bool = True, contact_sheet_path: Path | None = None,
-                 pipeline: Pipeline | None = None, on_frame: FrameCallback | None = None
+                 pipeline: Pipeline | None = None, on_frame: FrameCallback | None = None,
+                 with_images: bool = False, stop: StopRequest | None = None
                  ) -> BagEvaluation:
     """Run a bag through the pipeline.
 
     The summary is complete for the frames processed before an error (the evaluation's
-    ``stopped_by``); errors that stop the run before any frame (missing bag, no image
-    topic, bad truth file) are raised.
+    ``stopped_by``) or a stop request (``partial`` true); errors that stop the run
+    before any frame (missing bag, no image topic, bad truth file, an output that
+    cannot be created) are raised.
 
     Args:
         bag_path: ROS 2 bag directory, ``.mcap``/``.db3`` file or ROS 1 ``.bag`` file.
@@ -461,18 +395,24 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
         debug_images: also write ``/debug_image`` into the results bag.
         config: settings of the pipeline built for this bag (ignored with ``pipeline``).
         grace_s: see :func:`score_drive`, seconds.
-        progress: draw a progress bar on stderr (when it is a terminal).
+        progress: show progress on stderr (a bar on a terminal, else log lines).
         contact_sheet_path: PNG of annotated frames to write, or None.
         pipeline: an already built pipeline to use (for many bags in a row): it is reset
             before the bag and stays open afterwards; it must have been created on this
             thread. None builds one from ``config`` and closes it.
         on_frame: called after each frame, see :data:`FrameCallback`.
+        with_images: also write the input images and Foxglove annotations into the
+            results bag (:mod:`speed_sign_detector.tools.results_bag`).
+        stop: when its ``requested`` turns True (Ctrl-C), no further frame is read; the
+            frames read so far are finished and reported (``partial`` true).
 
     Raises:
         SpeedSignError: (BagError, TruthFileError, ...) when nothing could be processed.
     """
     from speed_sign_detector.image_conversion import message_to_gray
     from speed_sign_detector.pipeline import OverlappedPipeline, Pipeline
+    from speed_sign_detector.tools.contact_sheet import ContactSheetCollector
+    from speed_sign_detector.tools.results_bag import ResultsBagWriter
 
     tracks = group_tracks(read_truth(truth_path)) if truth_path is not None else None
     stopped_by: SpeedSignError | None = None
@@ -481,46 +421,48 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
     events: list[LimitEvent] = []
     recognized_ids: set[int] = set()
     limit_changes: list[tuple[float, int]] = []
+    interrupted = False
     with BagReader(bag_path) as bag:
         image_topic = bag.image_topic(topic)
-        writer = _ResultWriter(out_path, debug_images) if out_path is not None else None
-        sheet = (_ContactSheet(contact_sheet_path, image_topic.count)
+        frames_total = image_topic.count if image_topic.count >= 0 else None
+        writer = (ResultsBagWriter(out_path, debug_images, with_images)
+                  if out_path is not None else None)
+        sheet = (ContactSheetCollector(contact_sheet_path, frames_total)
                  if contact_sheet_path is not None else None)
-        bar = _Progress(image_topic.count if progress else 0)
-        bar.enabled = bar.enabled and progress
+        bar = ItemProgress(frames_total, 'frames', 'frame', enabled=progress)
         started = time.perf_counter()
         owns_pipeline = pipeline is None
         if pipeline is None:
             pipeline = Pipeline(config or PipelineConfig())
         else:
             pipeline.reset()   # a new drive: no tracks or active limit from the last bag
-        frames_total = image_topic.count if image_topic.count >= 0 else None
         try:
             backend, renderer = pipeline.backend_name, pipeline.renderer
             active_limit = 0
             recognition_errors: list[SpeedSignError] = []
 
-            def finish_frame(result: FrameResult, context: tuple[int, str, np.ndarray]) -> None:
+            def finish_frame(result: FrameResult,
+                             context: tuple[int, str, np.ndarray, Any]) -> None:
                 """Book one frame's result (recognition thread; frames in order)."""
                 nonlocal active_limit
-                stamp_ns, frame_id, gray = context
+                stamp_ns, frame_id, gray, message = context
                 latencies_ms.append(result.timings_ms['total'])
                 stamps_s.append(stamp_ns * 1e-9)
                 new_events = new_limit_events(result, recognized_ids)
                 events.extend(new_events)
                 if sheet is not None:
-                    sheet.offer(len(stamps_s) - 1, gray, result, bool(new_events))
+                    sheet.offer(len(stamps_s) - 1, stamp_ns * 1e-9, gray, result,
+                                [event.limit_kmh for event in new_events])
                 if result.active_limit_kmh != active_limit:
                     active_limit = result.active_limit_kmh
                     limit_changes.append((stamp_ns * 1e-9, active_limit))
                 if writer is not None:
-                    writer.write(stamp_ns, frame_id, gray, result)
-                bar.update(len(stamps_s), len(stamps_s) / max(
-                    time.perf_counter() - loop_started, 1e-9))
+                    writer.write(stamp_ns, frame_id, gray, result, message)
+                bar.update()
                 if on_frame is not None:
                     on_frame(len(stamps_s), frames_total)
 
-            def recognition_failed(error: Exception, context: tuple[int, str, np.ndarray]
+            def recognition_failed(error: Exception, context: tuple[int, str, np.ndarray, Any]
                                    ) -> None:
                 recognition_errors.append(SpeedSignError(
                     f'frame stamped {context[0]} ns could not be recognized: '
@@ -531,6 +473,9 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
             stages = OverlappedPipeline(pipeline, finish_frame, recognition_failed)
             try:
                 for submitted, item in enumerate(bag.messages(image_topic.name)):
+                    if stop is not None and stop.requested:
+                        interrupted = True
+                        break
                     if recognition_errors:
                         raise recognition_errors[0]
                     stamp_ns = header_stamp_ns(item.message, item.log_time_ns)
@@ -538,7 +483,8 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
                                            'frame_id', ''))
                     try:
                         gray = message_to_gray(item.message)
-                        stages.submit(gray, stamp_ns * 1e-9, context=(stamp_ns, frame_id, gray))
+                        stages.submit(gray, stamp_ns * 1e-9,
+                                      context=(stamp_ns, frame_id, gray, item.message))
                     except ValueError as err:
                         if isinstance(err, SpeedSignError):
                             raise
@@ -552,11 +498,15 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
                 stopped_by = err
             finally:
                 stages.close()  # the frames submitted before a failure are still booked
-                bar.finish()
+                bar.close()
                 if writer is not None:
                     writer.close()
-                if sheet is not None:
-                    sheet.write()
+            if sheet is not None:
+                sheet.write(f'{Path(bag_path).name}: {len(stamps_s)} frames of '
+                            f'{image_topic.name}, {_span_s(stamps_s):.1f} s of drive',
+                            [f'limits recognized: {_event_times(events, stamps_s)}']
+                            + ([f'stopped early: {stopped_by or "interrupted (Ctrl-C)"}']
+                               if stopped_by is not None or interrupted else []))
         finally:
             if owns_pipeline:
                 pipeline.close()
@@ -564,16 +514,19 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
         loop_s = time.perf_counter() - loop_started
         salvage_reason = bag.salvage_reason
     frames = len(stamps_s)
+    start_stamp_s = stamps_s[0] if frames else None
     summary: dict[str, Any] = {
         'bag': str(bag_path), 'topic': image_topic.name, 'msgtype': image_topic.msgtype,
-        'frames': frames,
-        'duration_s': round(stamps_s[-1] - stamps_s[0], 6) if frames > 1 else 0.0,
+        'frames': frames, 'frames_planned': frames_total, 'partial': interrupted,
+        'start_stamp_s': start_stamp_s,
+        'duration_s': round(_span_s(stamps_s), 6),
         'backend': backend, 'renderer': renderer,
         'fps': frames / loop_s if loop_s > 0 else 0.0,
         'latency_ms_p50': float(np.percentile(latencies_ms, 50)) if latencies_ms else None,
         'latency_ms_p95': float(np.percentile(latencies_ms, 95)) if latencies_ms else None,
         'elapsed_s': elapsed_s,
-        'limit_events': [{'stamp_s': e.stamp_s, 'limit_kmh': e.limit_kmh,
+        'limit_events': [{'stamp_s': e.stamp_s, 'time_s': round(e.stamp_s - stamps_s[0], 6),
+                          'limit_kmh': e.limit_kmh,
                           'x_px': None if math.isnan(e.x_px) else round(e.x_px, 1),
                           'y_px': None if math.isnan(e.y_px) else round(e.y_px, 1)}
                          for e in events],
@@ -584,22 +537,44 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
         'error': str(stopped_by) if stopped_by is not None else None,
     }
     if tracks is not None:
-        score = score_drive(tracks, events, stamps_s, grace_s)
+        score = score_drive(tracks, events, stamps_s, grace_s,
+                            stopped_early=interrupted or summary['truncated'])
         summary.update({'truth': str(truth_path), 'grace_s': grace_s})
         summary.update(drive_metrics({key: getattr(score, key) for key in DRIVE_COUNT_KEYS},
                                      score.drive_time_s))
+        summary['cut_signs'] = score.cut_signs
         summary['per_sign'] = [asdict(outcome) for outcome in score.outcomes]
     return BagEvaluation(summary, stopped_by)
 
 
+def _span_s(stamps_s: Sequence[float]) -> float:
+    """Seconds from the first to the last stamp (0 for fewer than two)."""
+    return stamps_s[-1] - stamps_s[0] if len(stamps_s) > 1 else 0.0
+
+
+def _event_times(events: Sequence[LimitEvent], stamps_s: Sequence[float]) -> str:
+    """``'50 at 3.20 s, end at 9.87 s'``: recognitions, seconds since the first frame."""
+    return ', '.join(f'{event.limit_kmh or "end"} at {event.stamp_s - stamps_s[0]:.2f} s'
+                     for event in events) or 'none'
+
+
+#: What the per-sign table's columns mean (printed under it).
+TABLE_LEGEND = ('columns: from s / to s = first and last time the sign is in view, s since '
+                'the first frame; max r = its largest radius, px; after s = time from its '
+                'first appearance to its recognition, s; r px = its radius then; wrong = '
+                'values wrongly read on it')
+
+
 def format_report(summary: dict[str, Any]) -> str:
-    """Human-readable per-sign table and summary."""
+    """Human-readable per-sign table and summary (times: seconds since the first frame)."""
     lines = []
     if 'per_sign' in summary:
         lines.append(f'{"sign":>5} {"kind":<22} {"limit":>5} {"from s":>7} {"to s":>7} '
                      f'{"max r":>6} {"result":<10} {"after s":>7} {"r px":>5}  wrong')
         for row in summary['per_sign']:
-            if row['limit_kmh'] > 0:
+            if row.get('cut'):
+                result = 'cut'
+            elif row['limit_kmh'] > 0:
                 result = 'recognized' if row['recognized'] else 'MISSED'
             elif row['kind'].startswith(END_OF_LIMIT_PREFIX):
                 result = 'end read' if row['recognized'] else 'end missed'
@@ -614,11 +589,14 @@ def format_report(summary: dict[str, Any]) -> str:
             lines.append(f'{row["track_id"]:>5} {row["kind"]:<22} {row["limit_kmh"]:>5} '
                          f'{row["first_s"]:7.2f} {row["last_s"]:7.2f} '
                          f'{row["max_radius_px"]:6.1f} {result:<10} {after} {radius}  {wrong}')
+        lines.append(TABLE_LEGEND)
         lines.append('')
         recall = summary['recall']
-        lines.append(f'signs {summary["signs"]}, recognized {summary["recognized"]}, recall '
-                     f'{recall:.3f}' if recall is not None else
-                     'signs 0 (no speed-limit sign in the truth)')
+        cut = (f' ({summary["cut_signs"]} more cut off by the early stop: not counted)'
+               if summary.get('cut_signs') else '')
+        lines.append((f'signs {summary["signs"]}, recognized {summary["recognized"]}, recall '
+                      f'{recall:.3f}' if recall is not None else
+                      'signs 0 (no speed-limit sign in the truth)') + cut)
         lines.append(f'wrong limits {summary["wrong_limits"]} (look-alike '
                      f'{summary["lookalike_limits"]}, misread {summary["misread_limits"]}, '
                      f'phantom {summary["phantom_limits"]}), '
@@ -631,15 +609,19 @@ def format_report(summary: dict[str, Any]) -> str:
                  f'{summary["duration_s"]:.1f} s of drive; {summary["fps"]:.1f} fps, latency '
                  + (f'p50 {p50:.1f} ms, p95 {p95:.1f} ms' if p50 is not None else 'n/a')
                  + f'; backend {summary["backend"]} ({summary["renderer"]})')
-    limits = ', '.join(f'{event["limit_kmh"] or "end"} at {event["stamp_s"]:.2f}'
+    limits = ', '.join(f'{event["limit_kmh"] or "end"} at {event["time_s"]:.2f} s'
                        for event in summary['limit_events']) or 'none'
-    lines.append(f'limits recognized: {limits}')
+    lines.append(f'limits recognized: {limits} (s since the first frame)')
     if summary['out_bag']:
         lines.append(f'results written to {summary["out_bag"]}')
     if summary.get('contact_sheet'):
         lines.append(f'contact sheet written to {summary["contact_sheet"]}')
     if summary['error']:
         lines.append(f'STOPPED EARLY: {summary["error"]}')
+    if summary.get('partial'):
+        planned = summary['frames_planned']
+        lines.append(f'PARTIAL: interrupted after {summary["frames"]} of '
+                     f'{planned if planned is not None else "?"} frames')
     return '\n'.join(lines)
 
 
@@ -649,18 +631,24 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         'bag', help='run a recorded drive (ROS 2 MCAP/sqlite3 or ROS 1 bag) through the '
         'pipeline', description='Run the image topic of a bag through the pipeline as fast '
         'as possible; with --truth, per-sign metrics (recall, wrong limits, false limits '
-        'per hour); with --out, a ROS 2 MCAP bag of the node\'s outputs.')
+        'per hour); with --out, a ROS 2 MCAP bag of the node\'s outputs (with --with-images, '
+        'viewable in Foxglove). Output paths are checked (missing folders created) before '
+        'the first frame. Ctrl-C reports the frames done, marked partial (exit status 130); '
+        'a truncated bag reports the frames before the cut (exit status 1).')
     parser.add_argument('bag', type=Path, help='ROS 2 bag directory, .mcap/.db3 file, or '
                         'ROS 1 .bag file')
     parser.add_argument('--topic', help='image topic (needed when the bag has several)')
     parser.add_argument('--truth', type=Path, help='truth CSV for per-sign metrics')
     parser.add_argument('--out', type=Path, help='write the outputs into this new ROS 2 '
-                        'MCAP bag')
+                        'MCAP bag (/candidates, /speed_limit)')
     parser.add_argument('--debug-images', action='store_true',
-                        help='with --out, also write /debug_image')
+                        help='with --out, also write /debug_image (bgr8 drawings)')
+    parser.add_argument('--with-images', action='store_true',
+                        help='with --out, also write the input images (/image/compressed) '
+                        'and Foxglove annotations of the detections (/image/annotations)')
     parser.add_argument('--contact-sheet', type=Path, metavar='PNG',
-                        help='write annotated frames (recognitions and evenly spaced others) '
-                        'as one picture')
+                        help='write the drive at a glance as one picture (.png or .jpg): '
+                        'frames around the limit changes, with time and active limit')
     parser.add_argument('--config', type=Path, help='parameter YAML file of the node')
     parser.add_argument('--backend', choices=('auto', 'gl', 'numpy'),
                         help='voting backend (overrides --config)')
@@ -677,19 +665,27 @@ def run(args: argparse.Namespace) -> int:
     config = load_yaml(args.config) if args.config is not None else PipelineConfig()
     if args.backend is not None:
         config = dataclasses.replace(config, backend=args.backend)
-    if args.debug_images and args.out is None:
-        print('speed_sign_eval bag: --debug-images has no effect without --out',
-              file=sys.stderr)
-    evaluation = evaluate_bag(args.bag, args.topic, args.truth, args.out,
-                              args.debug_images, config, args.grace,
-                              contact_sheet_path=args.contact_sheet)
+    for option, given in (('--debug-images', args.debug_images),
+                          ('--with-images', args.with_images)):
+        if given and args.out is None:
+            print(f'speed_sign_eval bag: {option} has no effect without --out',
+                  file=sys.stderr)
+    if args.out is not None:
+        prepare_output_bag(args.out, '--out')
+    if args.contact_sheet is not None:
+        prepare_output_file(args.contact_sheet, '--contact-sheet', CONTACT_SHEET_SUFFIXES)
+    with stop_on_interrupt('speed_sign_eval bag') as stop:
+        evaluation = evaluate_bag(args.bag, args.topic, args.truth, args.out,
+                                  args.debug_images, config, args.grace,
+                                  contact_sheet_path=args.contact_sheet,
+                                  with_images=args.with_images, stop=stop)
     if args.json:
         print(evaluation.to_json())
     else:
         print(format_report(evaluation.summary))
     if evaluation.stopped_by is not None:
         raise evaluation.stopped_by
-    return 0
+    return EXIT_INTERRUPTED if evaluation.summary['partial'] else 0
 
 
 def summary_json(summary: Mapping[str, Any]) -> str:
