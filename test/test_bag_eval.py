@@ -17,6 +17,7 @@ from speed_sign_detector.bag_io import BagReader, BagWriter, header_stamp_ns
 from speed_sign_detector.ros.messages import CANDIDATE_DTYPE, pointcloud_to_array
 from speed_sign_detector.synthetic import DriveConfig, SyntheticDrive
 from speed_sign_detector.tools import eval as eval_tool
+from speed_sign_detector.tools import eval_bag
 from speed_sign_detector.tools.synth import write_drive
 from speed_sign_detector.truth import group_tracks, write_truth
 
@@ -61,13 +62,14 @@ def drive(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
 @pytest.fixture(scope='module')
 def reference(drive: dict[str, Any], tmp_path_factory: pytest.TempPathFactory,
               bank_config: Path) -> dict[str, Any]:
-    """The MCAP raw bag with truth, results bag and debug images: the reference run."""
+    """The MCAP raw bag with truth, results bag with debug images, input images and
+    Foxglove annotations: the reference run."""
     out = tmp_path_factory.mktemp('out') / 'result'
     stdout, stderr = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
         status = eval_tool.main(['bag', str(drive['bags']['mcap_raw']), '--truth',
                                  str(drive['truth']), '--out', str(out), '--debug-images',
-                                 '--json', '--config', str(bank_config)])
+                                 '--with-images', '--json', '--config', str(bank_config)])
     assert status == 0, stderr.getvalue()
     return {'status': status, 'out': out, 'summary': last_json(stdout.getvalue())}
 
@@ -119,7 +121,9 @@ def test_results_bag_holds_outputs_at_input_stamps(drive: dict[str, Any],
         assert {name: topic.msgtype for name, topic in topics.items()} == {
             '/candidates': 'sensor_msgs/msg/PointCloud2',
             '/speed_limit': 'std_msgs/msg/UInt16',
-            '/debug_image': 'sensor_msgs/msg/Image'}
+            '/debug_image': 'sensor_msgs/msg/Image',
+            '/image/compressed': 'sensor_msgs/msg/CompressedImage',
+            '/image/annotations': 'foxglove_msgs/msg/ImageAnnotations'}
         clouds = list(bag.messages('/candidates'))
         limits = list(bag.messages('/speed_limit'))
         debug = list(bag.messages('/debug_image'))
@@ -156,8 +160,16 @@ def test_text_report_and_contact_sheet(drive: dict[str, Any], evaluate: Evaluate
     assert 'recall 1.000' in stdout
     assert 'frames of /camera/image_raw/compressed' in stdout
     assert f'contact sheet written to {sheet_path}' in stdout
+    assert eval_bag.TABLE_LEGEND in stdout   # what 'max r', 'after s', 'r px' mean
+    # times since the first frame, not epoch stamps
+    limits_line = next(line for line in stdout.splitlines()
+                       if line.startswith('limits recognized:'))
+    assert limits_line.endswith('(s since the first frame)')
+    times = [float(word) for word in limits_line.replace(',', ' ').split()
+             if word.replace('.', '', 1).isdigit() and '.' in word]
+    assert times and all(0.0 <= value <= CONFIG.duration_s for value in times)
     sheet = cv2.imread(str(sheet_path))
-    assert sheet is not None and sheet.shape[1] == 4 * 320 and sheet.shape[0] >= 240
+    assert sheet is not None and sheet.shape[1] == 1280 and sheet.shape[0] >= 400
 
 
 def test_truncated_bag_reports_and_writes_the_frames_before_the_cut(
@@ -213,3 +225,79 @@ def test_existing_output_is_refused_before_processing(
     status, _, stderr = evaluate(str(drive['bags']['mcap_raw']), '--out',
                                  str(tmp_path))
     assert status == 1 and 'exists already' in stderr
+
+
+def test_results_bag_with_images_opens_in_foxglove(drive: dict[str, Any],
+                                                   reference: dict[str, Any]) -> None:
+    """--with-images: the input frames as JPEG CompressedImages and, at the same stamps,
+    foxglove_msgs/ImageAnnotations (read back with rosbags from the bag's own message
+    definitions): a circle per candidate of /candidates, the value and PSR of each
+    candidate read as a limit, the active limit as published on /speed_limit."""
+    input_stamps = [CONFIG.stamp_ns(index) for index in range(CONFIG.frame_count)]
+    frames = list(SyntheticDrive(CONFIG))
+    with BagReader(reference['out']) as bag:
+        images = list(bag.messages('/image/compressed'))
+        annotations = list(bag.messages('/image/annotations'))
+        clouds = list(bag.messages('/candidates'))
+    assert [item.log_time_ns for item in images] == input_stamps
+    assert [item.log_time_ns for item in annotations] == input_stamps
+    for index in (0, len(images) - 1):   # colour JPEGs of the input frames
+        image = images[index].message
+        assert image.format == 'jpeg' and image.header.frame_id == 'camera'
+        decoded = cv2.imdecode(np.asarray(image.data, np.uint8), cv2.IMREAD_COLOR)
+        assert decoded.shape == frames[index].bgr.shape
+        assert np.abs(decoded.astype(int) - frames[index].bgr.astype(int)).mean() < 4.0
+    limit_texts = 0
+    for item, cloud in zip(annotations, clouds):
+        message, points = item.message, pointcloud_to_array(cloud.message)
+        assert all(mark.timestamp.sec * 10**9 + mark.timestamp.nanosec == item.log_time_ns
+                   for mark in [*message.circles, *message.labels])
+        assert len(message.circles) == points.size
+        for circle, point in zip(message.circles, points):
+            assert (circle.position.x, circle.position.y) == pytest.approx(
+                (point['u'], point['v']), abs=1e-3)
+            assert circle.diameter == pytest.approx(2 * point['radius'], abs=1e-3)
+        texts = [label.text for label in message.labels]
+        expected = [f"{point['limit_kmh']} psr {point['psr']:.0f}" for point in points
+                    if point['limit_kmh']]
+        assert [text for text in texts if text.split()[0].isdigit()] == expected
+        limit_texts += len(expected)
+    assert limit_texts > 0
+    last_banner = annotations[-1].message.labels[-1].text
+    final = reference['summary']['final_limit_kmh']
+    assert last_banner == (f'limit {final} km/h' if final else 'limit unknown')
+
+
+def test_a_sign_cut_off_by_the_truncation_is_reported_as_cut(
+        drive: dict[str, Any], reference: dict[str, Any], evaluate: Evaluate,
+        tmp_path: Path) -> None:
+    """A recording killed while a sign approaches (before the frame that recognized it in
+    the complete drive): the sign is 'cut', not missed, and stays out of recall."""
+    sign = next(track for track in drive['tracks'] if track.is_limit)
+    recognized_s = min(event['stamp_s'] for event in reference['summary']['limit_events']
+                       if event['limit_kmh'] == sign.limit_kmh)
+    first_frame = round((sign.first_stamp_s - CONFIG.start_stamp_s) * CONFIG.fps)
+    recognized_frame = round((recognized_s - CONFIG.start_stamp_s) * CONFIG.fps)
+    assert recognized_frame - first_frame >= 4, 'no time between appearance and recognition'
+    kept = (first_frame + recognized_frame) // 2
+    killed = tmp_path / 'killed'
+    write_drive(list(SyntheticDrive(CONFIG))[:kept], killed, 'mcap')
+    storage = next(killed.glob('*.mcap'))
+    storage.write_bytes(storage.read_bytes()[:-64])   # no footer: the recorder was killed
+    status, stdout, _ = evaluate(str(killed), '--truth', str(drive['truth']), '--json')
+    assert status == 1
+    summary = last_json(stdout)
+    assert summary['frames'] == kept and summary['truncated'] is True
+    rows = {row['track_id']: row for row in summary['per_sign']}
+    assert rows[sign.track_id]['cut'] is True and rows[sign.track_id]['recognized'] is False
+    assert summary['cut_signs'] >= 1
+    limit_rows = [row for row in rows.values() if row['limit_kmh'] > 0]
+    assert summary['signs'] == sum(not row['cut'] for row in limit_rows)
+    assert summary['cut_signs'] == sum(row['cut'] for row in limit_rows)
+    if summary['signs'] == 0:
+        assert summary['recall'] is None
+    report = eval_bag.format_report(summary)
+    sign_line = next(line for line in report.splitlines()
+                     if line.split()[:2] == [str(sign.track_id), sign.kind])
+    assert ' cut ' in sign_line and 'MISSED' not in sign_line
+    assert f"{summary['cut_signs']} more cut off by the early stop: not counted" in report

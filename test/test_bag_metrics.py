@@ -115,3 +115,29 @@ def test_metrics_of_many_drives_are_their_counts_summed() -> None:
     assert total['drive_time_s'] == pytest.approx(16.0)
     assert total['false_limits_per_hour'] == pytest.approx(1 / (16.0 / 3600.0))
     assert sum_drive_metrics([{'frames': 3}]) is None
+
+
+def test_signs_cut_off_by_an_early_stop_are_not_missed() -> None:
+    """The frames end at frame 60 (a truncated bag, Ctrl-C): the 80 sign (frames 50-70)
+    was in view and not yet recognized: cut, out of signs and recall. The 50 sign
+    (recognized) still counts; so would a sign that left view more than the grace
+    before the stop."""
+    stopped = score_drive(TRACKS, [LimitEvent(STAMPS[10], 50)], STAMPS[:61],
+                          grace_s=1.0, stopped_early=True)
+    assert (stopped.signs, stopped.recognized, stopped.recall, stopped.cut_signs) == \
+        (1, 1, 1.0, 1)
+    assert {outcome.track_id: outcome.cut for outcome in stopped.outcomes} == {
+        1: False, 2: False, 3: True}
+    # the same frames from a recording that really ends there: the 80 sign is missed
+    ended = score_drive(TRACKS, [LimitEvent(STAMPS[10], 50)], STAMPS[:61], grace_s=1.0)
+    assert (ended.signs, ended.recall, ended.cut_signs) == (2, 0.5, 0)
+    # recognized before the stop: counted, not cut
+    early = score_drive(TRACKS, [LimitEvent(STAMPS[10], 50), LimitEvent(STAMPS[55], 80)],
+                        STAMPS[:61], stopped_early=True)
+    assert (early.signs, early.recognized, early.cut_signs) == (2, 2, 0)
+    # a sign whose grace ends before the stop is judged: missed
+    late_stop = score_drive(TRACKS, [], STAMPS[:30], grace_s=0.5, stopped_early=True)
+    assert (late_stop.signs, late_stop.recognized, late_stop.cut_signs) == (1, 0, 0)
+    # ... but within the grace it is cut
+    within = score_drive(TRACKS, [], STAMPS[:25], grace_s=0.5, stopped_early=True)
+    assert (within.signs, within.cut_signs) == (0, 1) and within.recall is None

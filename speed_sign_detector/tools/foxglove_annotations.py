@@ -5,9 +5,11 @@ whose stamps match. :func:`register_foxglove_types` adds the ROS 2 definitions o
 message and of the messages it uses (below, as published in the foxglove/schemas
 repository, ``ros_foxglove_msgs/ros2``) to a rosbags typestore, so that a rosbags
 writer can serialize them and stores their definitions in the bag (MCAP schemas);
-:func:`image_annotations_message` draws one frame's results: a circle per candidate
-(green when read as a speed limit, orange otherwise, grey when not classified), the
-value and PSR as text beside it, and the active limit in the top-left corner.
+:func:`image_annotations_message` draws one frame's results as the contact sheet does
+(:func:`speed_sign_detector.visualization.detection_style`): a circle per candidate
+(green when read as a speed limit, orange otherwise, cyan when not classified), the
+value and PSR above a limit (``end`` and PSR above an end of limit), and the active
+limit in the top-left corner.
 No ROS installation is needed (the messages are rosbags classes).
 """
 from __future__ import annotations
@@ -19,6 +21,7 @@ from rosbags.typesys.store import Typestore
 
 from speed_sign_detector.errors import BagError
 from speed_sign_detector.pipeline import FrameResult
+from speed_sign_detector.visualization import COLOUR_TEXT, detection_style
 
 __all__ = ['IMAGE_ANNOTATIONS_MSGTYPE', 'FOXGLOVE_MESSAGE_DEFINITIONS',
            'image_annotations_message', 'register_foxglove_types']
@@ -74,17 +77,17 @@ foxglove_msgs/TextAnnotation[] labels
 ''',
 }
 
-#: RGBA (0..1) of the annotations: the contact sheet's and debug image's colours.
-RGBA_LIMIT = (0.0, 0.78, 0.0, 1.0)
-RGBA_OTHER = (1.0, 0.65, 0.0, 1.0)
-RGBA_UNCLASSIFIED = (0.7, 0.7, 0.7, 1.0)
-RGBA_TEXT = (1.0, 1.0, 1.0, 1.0)
 RGBA_TEXT_BACKGROUND = (0.0, 0.0, 0.0, 0.6)
 RGBA_NONE = (0.0, 0.0, 0.0, 0.0)
 #: Font size of the labels, pixels of the image.
 FONT_SIZE_PX = 14.0
 #: Outline thickness of the circles, pixels.
 CIRCLE_THICKNESS_PX = 2.0
+
+
+def rgba(bgr: tuple[int, int, int]) -> tuple[float, float, float, float]:
+    """An OpenCV BGR colour (0..255) as Foxglove's opaque RGBA (0..1)."""
+    return (bgr[2] / 255.0, bgr[1] / 255.0, bgr[0] / 255.0, 1.0)
 
 
 def register_foxglove_types(typestore: Typestore) -> None:
@@ -115,8 +118,8 @@ def image_annotations_message(result: FrameResult, stamp_ns: int, typestore: Typ
 
     Returns:
         A rosbags ``foxglove_msgs/msg/ImageAnnotations``: one circle per candidate (its
-        detected radius), one text per classified candidate (``'50 psr 12.3'``, or the
-        label of a non-limit answer), and the active limit at the top left.
+        detected radius), a text above each candidate read as a limit (``'50 psr 12'``)
+        or an end of limit (``'end psr 9'``), and the active limit at the top left.
     """
     types = typestore.types
     time = types['builtin_interfaces/msg/Time'](sec=stamp_ns // 1_000_000_000,
@@ -126,29 +129,25 @@ def image_annotations_message(result: FrameResult, stamp_ns: int, typestore: Typ
     circle = types['foxglove_msgs/msg/CircleAnnotation']
     text = types['foxglove_msgs/msg/TextAnnotation']
 
-    def label(position: tuple[float, float], words: str, rgba: tuple[float, ...]) -> Any:
-        return text(timestamp=time, position=point(x=position[0], y=position[1]), text=words,
-                    font_size=FONT_SIZE_PX, text_color=color(*rgba),
+    def label(x_px: float, y_px: float, words: str,
+              colour: tuple[float, float, float, float]) -> Any:
+        return text(timestamp=time, position=point(x=x_px, y=y_px), text=words,
+                    font_size=FONT_SIZE_PX, text_color=color(*colour),
                     background_color=color(*RGBA_TEXT_BACKGROUND))
 
     circles, labels = [], []
     for detection in result.detections:
-        candidate, classification = detection.candidate, detection.classification
-        if classification is None:
-            rgba, words = RGBA_UNCLASSIFIED, ''
-        elif classification.is_limit:
-            rgba, words = RGBA_LIMIT, f'{classification.label} psr {classification.psr:.1f}'
-        else:
-            rgba, words = RGBA_OTHER, f'{classification.label} psr {classification.psr:.1f}'
+        candidate = detection.candidate
+        colour, words = detection_style(detection)
         circles.append(circle(timestamp=time, position=point(x=candidate.x_px, y=candidate.y_px),
                               diameter=2.0 * candidate.radius_px,
                               thickness=CIRCLE_THICKNESS_PX, fill_color=color(*RGBA_NONE),
-                              outline_color=color(*rgba)))
+                              outline_color=color(*rgba(colour))))
         if words:
-            labels.append(label((candidate.x_px - candidate.radius_px,
-                                 candidate.y_px - candidate.radius_px - FONT_SIZE_PX), words,
-                                rgba))
+            labels.append(label(candidate.x_px - candidate.radius_px,
+                                max(0.0, candidate.y_px - candidate.radius_px - FONT_SIZE_PX),
+                                words, rgba(colour)))
     banner = (f'limit {result.active_limit_kmh} km/h' if result.active_limit_kmh
               else 'limit unknown')
-    labels.append(label((4.0, 4.0), banner, RGBA_TEXT))
+    labels.append(label(4.0, 4.0, banner, rgba(COLOUR_TEXT)))
     return types[IMAGE_ANNOTATIONS_MSGTYPE](circles=circles, points=[], labels=labels)
