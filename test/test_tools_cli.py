@@ -1,14 +1,16 @@
 """The installed command-line tools on real files, as a user runs them: bags of every
 format ``speed_sign_synth`` writes read back, a crop folder with a corrupt PNG, Ctrl-C
-in the middle of ``eval crops`` / ``eval scenes``, output folders, ``--version``."""
+in the middle of ``eval crops`` / ``scenes`` / ``bag``, output paths, ``--version``."""
 from __future__ import annotations
 
+import signal
+import subprocess
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
-from cli_helpers import interrupt_at_fifo, last_json, run_tool, tool
+from cli_helpers import DEADLINE_S, interrupt_at_fifo, last_json, run_tool, tool
 from test_detection_synthetic import ring_frame
 from test_recognition_eval_crops import CONFIG_YAML, LIMIT_CROPS, _write_crops
 
@@ -16,6 +18,7 @@ from speed_sign_detector import __version__
 from speed_sign_detector.bag_io import BagReader, header_stamp_ns
 from speed_sign_detector.image_conversion import message_to_gray
 from speed_sign_detector.synthetic import DriveConfig, SyntheticDrive
+from speed_sign_detector.tools.synth import write_drive
 from speed_sign_detector.truth import read_truth
 
 #: A tiny drive: 3 frames of 160x120.
@@ -172,3 +175,64 @@ def test_synth_errors_name_the_options(tmp_path: Path) -> None:
     assert '--duration must be in (0, 3600] seconds' in result.stderr
     assert 'duration_s' not in result.stderr
     assert not (tmp_path / 'drive').exists()
+
+
+@pytest.fixture(scope='module')
+def long_drive(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """15 s at 10 fps, 320x240: long enough that Ctrl-C lands in the middle."""
+    path = tmp_path_factory.mktemp('long_drive') / 'drive'
+    write_drive(SyntheticDrive(DriveConfig(seed=3, duration_s=15.0, fps=10, width_px=320,
+                                           height_px=240, focal_px=380.0)), path, 'mcap')
+    return path
+
+
+def test_ctrl_c_in_eval_bag_reports_and_keeps_the_frames_done(
+        long_drive: Path, bank_config: Path, tmp_path: Path) -> None:
+    """SIGINT once the first tenth of the frames is done (the progress log says so; the
+    other nine tenths take far longer than a signal): the metrics of the frames done,
+    marked partial, exit status 130; the results bag and the contact sheet (into a
+    folder that did not exist) hold exactly those frames."""
+    out = tmp_path / 'results'
+    sheet = tmp_path / 'new' / 'folder' / 'sheet.png'
+    process = subprocess.Popen(
+        [*tool('speed_sign_eval'), 'bag', str(long_drive), '--json', '--out', str(out),
+         '--contact-sheet', str(sheet), '--config', str(bank_config)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert process.stderr is not None
+        seen = []
+        for line in process.stderr:
+            seen.append(line)
+            if line.rstrip().endswith('/150 frames'):
+                process.send_signal(signal.SIGINT)
+                break
+        stdout, rest = process.communicate(timeout=DEADLINE_S)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    stderr = ''.join(seen) + rest
+    assert process.returncode == 130, stderr
+    summary = last_json(stdout)
+    assert summary['partial'] is True and summary['frames_planned'] == 150
+    assert 15 <= summary['frames'] < 150
+    assert 'interrupted' in stderr
+    with BagReader(out) as bag:
+        assert len(list(bag.messages('/candidates'))) == summary['frames']
+    assert cv2.imread(str(sheet)) is not None
+
+
+def test_eval_bag_checks_its_output_paths_before_the_first_frame(
+        long_drive: Path, tmp_path: Path) -> None:
+    """Outputs that cannot be written are refused at once, naming the option; nothing is
+    processed (no JSON), nothing is left behind."""
+    blocker = tmp_path / 'a_file'
+    blocker.write_text('not a folder')
+    cases = [(['--contact-sheet', str(blocker / 'sheet.png')], '--contact-sheet'),
+             (['--contact-sheet', str(tmp_path / 'sheet.gif')], 'must end in .png'),
+             (['--out', str(blocker / 'results')], '--out'),
+             (['--out', str(blocker)], 'exists already')]
+    for arguments, message in cases:
+        result = run_tool('speed_sign_eval', 'bag', str(long_drive), '--json', *arguments)
+        assert result.returncode == 1, arguments
+        assert message in result.stderr and result.stdout == ''
+        assert 'speed_sign_eval bag: error:' in result.stderr
