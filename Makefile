@@ -21,8 +21,8 @@ demo: $(INSTALLED)
 	$(BIN)/speed_sign_synth $(OUT)/demo/drive --truth $(OUT)/demo/truth.csv --seed 7 \
 		--duration 24 --lighting mixed --compressed
 	$(BIN)/speed_sign_eval bag $(OUT)/demo/drive --truth $(OUT)/demo/truth.csv \
-		--out $(OUT)/demo/results --contact-sheet $(OUT)/demo/contact_sheet.png
-	@echo "results bag: $(OUT)/demo/results   picture: $(OUT)/demo/contact_sheet.png"
+		--out $(OUT)/demo/results --with-images --contact-sheet $(OUT)/demo/contact_sheet.png
+	@echo "results bag (opens in Foxglove): $(OUT)/demo/results   picture: $(OUT)/demo/contact_sheet.png"
 
 ## live-demo: node + bag replay + monitor over DDS (real rclpy, Fast DDS), in one command;
 ## the monitor prints a line per diagnostics report and, when the drive has ended, the
