@@ -502,11 +502,14 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
                 if writer is not None:
                     writer.close()
             if sheet is not None:
-                sheet.write(f'{Path(bag_path).name}: {len(stamps_s)} frames of '
-                            f'{image_topic.name}, {_span_s(stamps_s):.1f} s of drive',
-                            [f'limits recognized: {_event_times(events, stamps_s)}']
-                            + ([f'stopped early: {stopped_by or "interrupted (Ctrl-C)"}']
-                               if stopped_by is not None or interrupted else []))
+                try:
+                    sheet.write(f'{Path(bag_path).name}: {len(stamps_s)} frames of '
+                                f'{image_topic.name}, {_span_s(stamps_s):.1f} s of drive',
+                                [f'limits recognized: {_event_times(events, stamps_s)}']
+                                + ([f'stopped early: {stopped_by or "interrupted (Ctrl-C)"}']
+                                   if stopped_by is not None or interrupted else []))
+                except SpeedSignError as err:   # the metrics are still reported
+                    stopped_by = stopped_by or err
         finally:
             if owns_pipeline:
                 pipeline.close()
