@@ -107,13 +107,18 @@ def draw_tile(frame: np.ndarray, result: FrameResult, width_px: int, caption: st
     scale = width_px / frame.shape[1]
     height_px = int(round(frame.shape[0] * scale))
     picture = cv2.resize(to_bgr(frame), (width_px, height_px), interpolation=cv2.INTER_AREA)
+    marks = []
     for detection in result.detections:
         colour, words = detection_style(detection)
         candidate = detection.candidate
         centre = (int(round(candidate.x_px * scale)), int(round(candidate.y_px * scale)))
         radius = max(3, int(round(candidate.radius_px * scale)) + 2)
+        marks.append((colour == COLOUR_LIMIT, centre, radius, colour, words))
+    marks.sort(key=lambda mark: mark[0])   # limits drawn last, on top
+    for _, centre, radius, colour, _ in marks:
         cv2.circle(picture, centre, radius, colour, 2 if colour == COLOUR_LIMIT else 1,
                    cv2.LINE_AA)
+    for _, centre, radius, colour, words in marks:   # words over every circle
         if words:
             (text_width, _), _ = cv2.getTextSize(words, SHEET_FONT, SHEET_FONT_SCALE, 1)
             x = min(max(2, centre[0] - text_width // 2), width_px - text_width - 2)
