@@ -421,7 +421,7 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
     events: list[LimitEvent] = []
     recognized_ids: set[int] = set()
     limit_changes: list[tuple[float, int]] = []
-    interrupted = False
+    interrupted = sheet_written = False
     with BagReader(bag_path) as bag:
         image_topic = bag.image_topic(topic)
         frames_total = image_topic.count if image_topic.count >= 0 else None
@@ -502,12 +502,13 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
                 if writer is not None:
                     writer.close()
             if sheet is not None:
+                header = (f'{Path(bag_path).name}: {len(stamps_s)} frames of '
+                          f'{image_topic.name}, {_span_s(stamps_s):.1f} s of drive')
+                notes = [f'limits recognized: {_event_times(events, stamps_s)}']
+                if stopped_by is not None or interrupted:
+                    notes.append(f'stopped early: {stopped_by or "interrupted (Ctrl-C)"}')
                 try:
-                    sheet.write(f'{Path(bag_path).name}: {len(stamps_s)} frames of '
-                                f'{image_topic.name}, {_span_s(stamps_s):.1f} s of drive',
-                                [f'limits recognized: {_event_times(events, stamps_s)}']
-                                + ([f'stopped early: {stopped_by or "interrupted (Ctrl-C)"}']
-                                   if stopped_by is not None or interrupted else []))
+                    sheet_written = sheet.write(header, notes)
                 except SpeedSignError as err:   # the metrics are still reported
                     stopped_by = stopped_by or err
         finally:
@@ -535,7 +536,7 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
                          for e in events],
         'final_limit_kmh': limit_changes[-1][1] if limit_changes else 0,
         'out_bag': str(out_path) if out_path is not None else None,
-        'contact_sheet': str(contact_sheet_path) if contact_sheet_path is not None else None,
+        'contact_sheet': str(contact_sheet_path) if sheet_written else None,
         'truncated': stopped_by is not None or salvage_reason is not None,
         'error': str(stopped_by) if stopped_by is not None else None,
     }
