@@ -236,3 +236,19 @@ def test_eval_bag_checks_its_output_paths_before_the_first_frame(
         assert result.returncode == 1, arguments
         assert message in result.stderr and result.stdout == ''
         assert 'speed_sign_eval bag: error:' in result.stderr
+
+
+@pytest.mark.parametrize(('command', 'expected'), [
+    (('speed_sign_eval', 'scenes', '--help'), ['found when one of the frame', '--backend']),
+    (('speed_sign_eval', 'crops', '--help'), ['Classify every crop listed', 'read as a speed limit']),
+    (('speed_sign_eval', 'bag', '--help'), ['--with-images', 'Foxglove']),
+    (('speed_sign_synth', '--help'), ['image width, px (default 640)', '(default 480)']),
+    (('speed_sign_replay', '--help'), ['queue depth (default 5)'])])
+def test_help_texts_are_plain_and_complete(command: tuple[str, ...], expected: list[str]) -> None:
+    """No reStructuredText markup; the description and the option help users asked for."""
+    result = run_tool(*command)
+    assert result.returncode == 0
+    text = ' '.join(result.stdout.split())   # argparse wraps lines
+    assert '``' not in text and ':mod:' not in text
+    for words in expected:
+        assert words in text, words
