@@ -11,8 +11,9 @@ Reading (:class:`BagReader`):
 - Truncated recordings (a recorder killed before it closed the file): an MCAP file
   without its footer, or a ROS 1 bag without its index, cannot be opened by rosbags.
   :class:`BagReader` then falls back to scanning the file record by record
-  ("salvage mode", :mod:`speed_sign_detector.bag_salvage`), yields every complete message, and raises :class:`BagError` once
-  it reaches the cut, so callers can report what came before. The same happens when
+  ("salvage mode", :mod:`speed_sign_detector.bag_salvage`), yields every complete
+  message, and raises :class:`BagError` once it reaches the cut, so callers can report
+  what came before. The same happens when
   a storage error (e.g. a damaged sqlite3 page) interrupts iteration.
 
 Writing (:class:`BagWriter`): ROS 2 MCAP or sqlite3 bags and ROS 1 bags, with message

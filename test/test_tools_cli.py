@@ -240,7 +240,8 @@ def test_eval_bag_checks_its_output_paths_before_the_first_frame(
 
 @pytest.mark.parametrize(('command', 'expected'), [
     (('speed_sign_eval', 'scenes', '--help'), ['found when one of the frame', '--backend']),
-    (('speed_sign_eval', 'crops', '--help'), ['Classify every crop listed', 'read as a speed limit']),
+    (('speed_sign_eval', 'crops', '--help'),
+     ['Classify every crop listed', 'read as a speed limit']),
     (('speed_sign_eval', 'bag', '--help'), ['--with-images', 'Foxglove']),
     (('speed_sign_synth', '--help'), ['image width, px (default 640)', '(default 480)']),
     (('speed_sign_replay', '--help'), ['queue depth (default 5)'])])
