@@ -122,24 +122,26 @@ def test_recognition_fields_on_rendered_signs(tmp_path: Path,
 
 def test_unreadable_images_are_skipped_and_listed(tmp_path: Path,
                                                   capsys: pytest.CaptureFixture[str]) -> None:
-    """A corrupt and an empty image do not stop the run: the others are evaluated, both
-    are listed with their reason, and the exit status is 1."""
+    """A corrupt, an empty and a too small image do not stop the run: the others are
+    evaluated, each is listed with its reason, and the exit status is 1."""
     (tmp_path / 'images').mkdir()
     cv2.imwrite(str(tmp_path / 'images' / '00000.png'), ring_frame(400, 300, (120.0, 90.0), 14.0))
     (tmp_path / 'images' / '00001.png').write_bytes(b'\x89PNG\r\n\x1a\n' + bytes(100))
     (tmp_path / 'images' / '00002.jpg').write_bytes(b'')
+    cv2.imwrite(str(tmp_path / 'images' / '00003.png'), np.zeros((20, 30), np.uint8))
     (tmp_path / 'gt.txt').write_text('00000.png;106.5;76.5;134.5;104.5;1\n'
                                      '00001.png;10;10;30;30;1\n')
     assert eval_tool.main(['scenes', str(tmp_path), '--json', '--no-classify']) == 1
     captured = capsys.readouterr()
     result = json.loads(captured.out.strip().splitlines()[-1])
-    assert result['frames'] == 1 and result['frames_planned'] == 3
+    assert result['frames'] == 1 and result['frames_planned'] == 4
     assert result['signs'] == 1 and result['found'] == 1 and result['partial'] is False
     reasons = {item['file']: item['reason'] for item in result['unreadable']}
-    assert set(reasons) == {'images/00001.png', 'images/00002.jpg'}
+    assert set(reasons) == {'images/00001.png', 'images/00002.jpg', 'images/00003.png'}
     assert 'does not decode' in reasons['images/00001.png']
     assert reasons['images/00002.jpg'] == 'empty file (0 bytes)'
-    assert '2 image(s) could not be read' in captured.err
+    assert 'smaller than the voting window' in reasons['images/00003.png']
+    assert '3 image(s) could not be read or used' in captured.err
     assert eval_tool.main(['scenes', str(tmp_path), '--no-classify']) == 1
     table = capsys.readouterr().out
-    assert 'UNREADABLE 2 images (skipped):' in table and 'images/00002.jpg: empty' in table
+    assert 'UNREADABLE 3 images (skipped):' in table and 'images/00002.jpg: empty' in table

@@ -18,8 +18,9 @@ detector reports the radius of the edge that voted, mostly the inner edge of the
 with classification: ``recognized``, ``recognition_recall``, ``false_limits``,
 ``false_limits_per_frame``, ``classifier_ms_per_frame``. Run state: ``frames_planned``,
 ``partial`` (true after Ctrl-C: the metrics cover the ``frames`` done, exit status 130),
-``unreadable`` (image files that could not be read, ``{file, reason}``: skipped, the
-rest evaluated, exit status 1). Rates over no frame or no sign are 0 (null for times).
+``unreadable`` (image files that could not be read or used, e.g. smaller than the
+detector's window, ``{file, reason}``: skipped, the rest evaluated, exit status 1).
+Rates over no frame or no sign are 0.
 """
 from __future__ import annotations
 
@@ -37,7 +38,7 @@ from pathlib import Path
 from speed_sign_detector.config import PipelineConfig, load_yaml
 from speed_sign_detector.detection.candidates import Candidate
 from speed_sign_detector.detection.detector import Detector
-from speed_sign_detector.errors import TruthFileError
+from speed_sign_detector.errors import InvalidFrameError, TruthFileError
 from speed_sign_detector.recognition.classifier import Classification, Classifier
 from speed_sign_detector.tools.image_files import (
     UnreadableImage,
@@ -232,7 +233,11 @@ def run(args: argparse.Namespace) -> int:
                 unreadable.append(UnreadableImage(f'images/{name}', str(err)))
                 continue
             tick = time.perf_counter()
-            candidates = detector.detect(gray)
+            try:
+                candidates = detector.detect(gray)
+            except InvalidFrameError as err:   # e.g. smaller than the voting window
+                unreadable.append(UnreadableImage(f'images/{name}', str(err)))
+                continue
             detector_s += time.perf_counter() - tick
             classifications: tuple[Classification, ...] = ()
             if classifier is not None:
@@ -296,8 +301,8 @@ def run(args: argparse.Namespace) -> int:
     else:
         _print_table(result)
     if unreadable:
-        print(f'speed_sign_eval scenes: {len(unreadable)} image(s) could not be read and were '
-              f"skipped (listed under 'unreadable')", file=sys.stderr)
+        print(f'speed_sign_eval scenes: {len(unreadable)} image(s) could not be read or used '
+              f"and were skipped (listed under 'unreadable')", file=sys.stderr)
     if result['partial']:
         return EXIT_INTERRUPTED
     return 1 if unreadable else 0
