@@ -28,16 +28,6 @@ SYNTH_ARGS = ('--seed', '4', '--duration', '0.5', '--fps', '6', '--width', '160'
 
 
 @pytest.fixture(scope='module')
-def bank_config(pytestconfig: pytest.Config, tmp_path_factory: pytest.TempPathFactory
-                ) -> Path:
-    """A node parameter file caching the classifier's filter banks between runs."""
-    cache_dir = pytestconfig.cache.mkdir('speed_sign_filter_banks')
-    path = tmp_path_factory.mktemp('config') / 'params.yaml'
-    path.write_text(f'classifier:\n  cache_dir: "{cache_dir}"\n')
-    return path
-
-
-@pytest.fixture(scope='module')
 def crop_config(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A parameter file with small filter banks, cached for the module."""
     folder = tmp_path_factory.mktemp('crop_config')
