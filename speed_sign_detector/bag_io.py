@@ -51,7 +51,12 @@ from rosbags.rosbag2 import WriterError as Ros2WriterError
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
-from speed_sign_detector.bag_salvage import ROS1_MAGIC, SalvagedBag, normalize_msgtype, scan_file
+from speed_sign_detector.bag_salvage import (
+    ROS1_MAGIC,
+    SalvagedBag,
+    normalize_msgtype,
+    scan_file,
+)
 from speed_sign_detector.errors import BagError
 
 LOGGER = logging.getLogger(__name__)

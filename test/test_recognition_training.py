@@ -23,9 +23,11 @@ from speed_sign_detector.recognition.bank_file import load_bank_file, save_bank_
 from speed_sign_detector.recognition.classifier import Classifier, crop_sign_radius
 from speed_sign_detector.recognition.filter_banks import bank_radii, build_banks
 from speed_sign_detector.recognition.labelled_crops import read_crop_folder, track_folds
+from speed_sign_detector.recognition.second_opinion import SecondOpinion
 from speed_sign_detector.recognition.templates import LIMIT_VALUES_KMH, render_sign
 from speed_sign_detector.recognition.trained_bank import (
     TRAINED_BANK_FORMAT,
+    TRAINED_BANK_VERSION,
     TrainedBank,
     load_trained_bank,
     save_trained_bank,
@@ -101,6 +103,8 @@ def test_training_gives_a_bank_that_reads_those_signs(trained: TrainedBank) -> N
     # the real classes, and from the renderings every limit the package draws
     assert {'30', '50', '80', 'other_sign', 'end_of_limit'} <= set(trained.second_opinion.labels)
     assert {str(v) for v in LIMIT_VALUES_KMH} <= set(trained.second_opinion.labels)
+    # it chooses only among the labels it saw real examples of
+    assert set(trained.second_opinion.real_labels) == {'30', '50', '80', 'other_sign'}
     assert set(trained.class_examples) == {'30', '50', '80'}
     assert trained.provenance['counts_per_class'] == {'30': 9, '50': 9, '80': 9,
                                                       'other_sign': 9}
@@ -150,8 +154,8 @@ def test_corrupt_bank_file_is_a_clear_error(tmp_path: Path, trained: TrainedBank
 
 def test_bank_of_another_version_or_format_is_refused(tmp_path: Path) -> None:
     path = tmp_path / 'bank.npz'
-    save_bank_file(path, {'x': np.zeros(3)}, {}, TRAINED_BANK_FORMAT, 2)
-    with pytest.raises(BankFileError, match='version 2.*reads version'):
+    save_bank_file(path, {'x': np.zeros(3)}, {}, TRAINED_BANK_FORMAT, TRAINED_BANK_VERSION + 1)
+    with pytest.raises(BankFileError, match=f'version {TRAINED_BANK_VERSION + 1}.*reads version'):
         load_trained_bank(path)
     save_bank_file(path, {'x': np.zeros(3)}, {}, 'something.else', 1)
     with pytest.raises(BankFileError, match="'something.else'"):
@@ -256,3 +260,27 @@ def test_train_command_builds_a_bank_and_reports_bad_input(tmp_path: Path,
     assert failed.returncode == 1
     assert 'is empty' in failed.stderr and 'Traceback' not in failed.stderr
     assert not (tmp_path / 'x.npz').exists()
+
+
+def _opinion(labels: tuple[str, ...], real: tuple[str, ...]) -> SecondOpinion:
+    size = len(labels)
+    return SecondOpinion(labels, np.zeros(1, np.float32), np.ones(1, np.float32),
+                         np.zeros((1, size), np.float32), np.zeros(size, np.float32), real)
+
+
+def test_second_opinion_chooses_only_among_ranked_real_labels() -> None:
+    opinion = _opinion(('30', '70', '80', '130', 'other_sign'), ('30', '70', '80', 'other_sign'))
+    scores = np.asarray([0.9, 0.2, -0.5, -0.9, -1.0])  # the model reads 30, lead 0.7
+    # it may overrule the correlation's winner with its runner-up ...
+    assert opinion.choose(scores, ['70', '30', '80'], 2, 0.2) == '30'
+    # ... but never picks a label the correlation did not rank among the leaders
+    assert opinion.choose(scores, ['70', '80', '30'], 2, 0.2) is None
+    # a small lead withholds the answer
+    assert opinion.choose(np.asarray([0.9, 0.8, 0.0, 0.0, 0.0]), ['30', '70'], 2, 0.2) is None
+    # a label learned from renderings only is never its choice over a real one
+    rendered_best = np.asarray([0.1, -0.5, -0.5, 0.9, -1.0])
+    assert opinion.choose(rendered_best, ['30', '130'], 2, 0.2) == '30'
+    # the correlation's rendered-only winner stands, unless the model reads another limit
+    assert opinion.choose(rendered_best, ['130', '30'], 2, 0.2) == '130'
+    assert opinion.choose(scores, ['130', '30'], 2, 0.2) is None
+    assert opinion.choose(scores, [], 2, 0.2) is None

@@ -9,7 +9,9 @@ sides (:func:`track_folds`).
 from __future__ import annotations
 
 import csv
+import logging
 import zlib
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,7 +20,10 @@ import numpy as np
 
 from speed_sign_detector.errors import TrainingDataError
 
-__all__ = ['GTSRB_CLASS_NAMES', 'LabelledCrop', 'read_crop_folder', 'track_folds']
+__all__ = ['GTSRB_CLASS_NAMES', 'LABELS_HEADER', 'LabelRow', 'LabelledCrop', 'read_crop_folder',
+           'read_label_rows', 'track_folds']
+
+_LOG = logging.getLogger(__name__)
 
 #: GTSRB class id -> the classifier's label for it: the limit in km/h as a string,
 #: ``'end_of_limit'``, or ``'other_sign'`` for the round look-alikes (negatives).
@@ -62,40 +67,76 @@ def _track_of(filename: str) -> str:
     return f'{path.parent.as_posix()}/{path.stem.split("_")[0]}'
 
 
-def read_crop_folder(folder: Path, classes: Sequence[int] | None = None
-                     ) -> list[LabelledCrop]:
-    """The rows of ``folder/labels.csv`` (of ``classes`` only, when given).
+#: The header of ``labels.csv``.
+LABELS_HEADER = 'Filename;Width;Height;Roi.X1;Roi.Y1;Roi.X2;Roi.Y2;ClassId'
+
+
+@dataclass(frozen=True)
+class LabelRow:
+    """One row of ``labels.csv``: the file name (relative to the folder), the sign's box
+    (x1, y1, x2, y2, inclusive corners, pixels) and the GTSRB class id."""
+
+    filename: str
+    roi: tuple[int, int, int, int]
+    class_id: int
+
+
+def read_label_rows(folder: Path) -> list[LabelRow]:
+    """Every row of ``folder/labels.csv``, whatever its class.
 
     Raises:
-        TrainingDataError: when the file is missing, empty or malformed, or names a class
-            the package has no label for.
+        TrainingDataError: when the file is missing, empty, has no rows, or a row is
+            malformed (the row is named).
     """
     path = Path(folder) / 'labels.csv'
     try:
         with path.open(newline='') as handle:
-            rows = list(csv.DictReader(handle, delimiter=';'))
-    except (OSError, UnicodeDecodeError, csv.Error) as err:
+            text = handle.read()
+    except (OSError, UnicodeDecodeError) as err:
         raise TrainingDataError(f'cannot read {path}: {err}') from err
+    if not text.strip():
+        raise TrainingDataError(f'{path} is empty: expected the header {LABELS_HEADER} and '
+                                'one row per crop')
+    try:
+        rows = list(csv.DictReader(text.splitlines(), delimiter=';'))
+    except csv.Error as err:
+        raise TrainingDataError(f'{path} is not a ;-separated table: {err}') from err
     if not rows:
-        raise TrainingDataError(f'{path} is empty: it lists no crop')
-    crops: list[LabelledCrop] = []
+        raise TrainingDataError(f'{path} has a header but no rows (one row per crop '
+                                'expected)')
+    parsed: list[LabelRow] = []
     for number, row in enumerate(rows, start=2):
         try:
-            class_id = int(row['ClassId'])
-            roi = (int(row['Roi.X1']), int(row['Roi.Y1']), int(row['Roi.X2']),
-                   int(row['Roi.Y2']))
-            filename = row['Filename']
+            parsed.append(LabelRow(row['Filename'], (int(row['Roi.X1']), int(row['Roi.Y1']),
+                                                     int(row['Roi.X2']), int(row['Roi.Y2'])),
+                                   int(row['ClassId'])))
         except (KeyError, TypeError, ValueError) as err:
-            raise TrainingDataError(
-                f'{path}:{number}: malformed row {row!r} ({err}); expected '
-                'Filename;Width;Height;Roi.X1;Roi.Y1;Roi.X2;Roi.Y2;ClassId') from err
-        if classes is not None and class_id not in classes:
+            raise TrainingDataError(f'{path}:{number}: malformed row {row!r} ({err}); '
+                                    f'expected {LABELS_HEADER}') from err
+    return parsed
+
+
+def read_crop_folder(folder: Path, classes: Sequence[int] | None = None
+                     ) -> list[LabelledCrop]:
+    """The crops of ``folder/labels.csv`` of the classes the package has a label for
+    (:data:`GTSRB_CLASS_NAMES`; of ``classes`` only, when given). Rows of other classes
+    are skipped and logged.
+
+    Raises:
+        TrainingDataError: when the file is missing, empty or malformed.
+    """
+    crops: list[LabelledCrop] = []
+    skipped: Counter[int] = Counter()
+    for row in read_label_rows(folder):
+        if row.class_id not in GTSRB_CLASS_NAMES or (classes is not None
+                                                     and row.class_id not in classes):
+            skipped[row.class_id] += 1
             continue
-        if class_id not in GTSRB_CLASS_NAMES:
-            raise TrainingDataError(
-                f'{path}:{number}: class {class_id} is neither a speed limit (0-8) nor a '
-                f'known look-alike ({sorted(k for k in GTSRB_CLASS_NAMES if k > 8)})')
-        crops.append(LabelledCrop(Path(folder) / filename, roi, class_id, _track_of(filename)))
+        crops.append(LabelledCrop(Path(folder) / row.filename, row.roi, row.class_id,
+                                  _track_of(row.filename)))
+    if skipped:
+        _LOG.info('%s: skipped %d crops of classes %s', folder, sum(skipped.values()),
+                  ', '.join(str(class_id) for class_id in sorted(skipped)))
     return crops
 
 

@@ -2,10 +2,11 @@
 correlation filters ranked highest, or withholds the answer.
 
 It never adds a class: it picks one of the correlation's ``candidates`` leading labels,
-and only when it agrees that this label is the best of all it knows, with a lead of at
-least ``min_lead``. A class it has no examples of (a limit with no real crops, such as
-130 km/h) is left to the correlation filters, unless the model confidently reads another
-limit there, in which case the answer is withheld.
+and only when it agrees that this label is the best of the labels it has real examples
+of, with a lead of at least ``min_lead``. A class it has no real examples of (a limit
+such as 130 km/h, learned from renderings only) is never its choice: when the
+correlation filters rank such a class first, their answer stands, unless the model
+confidently reads another limit there, in which case the answer is withheld.
 
 The model is ridge regression onto +-1 class indicators (one-vs-rest), solved in closed
 form with numpy on standardised :mod:`.sign_features`; its scores are comparable across
@@ -32,6 +33,8 @@ class SecondOpinion:
         feature_scale: (D,) float32 standard deviation of the training features.
         weights: (D, C) float32 ridge weights on the standardised features.
         bias: (C,) float32.
+        real_labels: the labels it was trained on real examples of (the others were
+            learned from renderings only).
     """
 
     labels: tuple[str, ...]
@@ -39,6 +42,7 @@ class SecondOpinion:
     feature_scale: np.ndarray
     weights: np.ndarray
     bias: np.ndarray
+    real_labels: tuple[str, ...]
 
     def scores(self, features: np.ndarray) -> np.ndarray:
         """(N, C) scores of (N, D) feature vectors (about +1 for the class, -1 else)."""
@@ -66,22 +70,26 @@ class SecondOpinion:
         if not distinct:
             return None
         order = np.argsort(-scores)
-        model_best = self.labels[int(order[0])]
-        lead = float(scores[order[0]] - scores[order[1]]) if len(order) > 1 else np.inf
-        if distinct[0] not in self.labels:
-            # no examples of the correlation's winner: it stands unless the model
+        if distinct[0] not in self.real_labels:
+            # no real examples of the correlation's winner: it stands unless the model
             # confidently reads another limit
-            if model_best.isdigit() and lead >= min_lead:
+            model_best = self.labels[int(order[0])]
+            lead = float(scores[order[0]] - scores[order[1]]) if len(order) > 1 else np.inf
+            if model_best.isdigit() and model_best != distinct[0] and lead >= min_lead:
                 return None
             return distinct[0]
-        allowed = [label for label in distinct[:candidates] if label in self.labels]
+        real = [int(i) for i in order if self.labels[int(i)] in self.real_labels]
+        model_best = self.labels[real[0]]
+        lead = float(scores[real[0]] - scores[real[1]]) if len(real) > 1 else np.inf
+        allowed = [label for label in distinct[:candidates] if label in self.real_labels]
         if model_best not in allowed or lead < min_lead:
             return None
         return model_best
 
 
 def fit_second_opinion(features: np.ndarray, labels: Sequence[str], ridge: float,
-                       weights: np.ndarray | None = None) -> SecondOpinion:
+                       weights: np.ndarray | None = None,
+                       real_labels: Sequence[str] | None = None) -> SecondOpinion:
     """Fit the model in closed form.
 
     Args:
@@ -89,6 +97,7 @@ def fit_second_opinion(features: np.ndarray, labels: Sequence[str], ridge: float
         labels: (N,) label of each.
         ridge: Tikhonov regularisation (> 0) on the standardised features.
         weights: optional (N,) sample weights (for example to balance classes).
+        real_labels: the labels with real examples (default: every label).
 
     Returns:
         The fitted :class:`SecondOpinion`.
@@ -125,5 +134,6 @@ def fit_second_opinion(features: np.ndarray, labels: Sequence[str], ridge: float
         gram = centred_x.T @ centred_x
         solution = np.linalg.solve(gram + ridge * np.eye(dimension), centred_x.T @ centred_y)
     bias = y_mean - x_mean @ solution
+    real = tuple(name for name in names if real_labels is None or name in real_labels)
     return SecondOpinion(names, mean.astype(np.float32), scale.astype(np.float32),
-                         solution.astype(np.float32), bias.astype(np.float32))
+                         solution.astype(np.float32), bias.astype(np.float32), real)

@@ -25,7 +25,7 @@ __all__ = ['DEFAULT_BANK_FILE', 'NO_BANK_FILE', 'TRAINED_BANK_FORMAT', 'TrainedB
            'load_trained_bank', 'resolve_bank_file', 'save_trained_bank']
 
 TRAINED_BANK_FORMAT = 'speed_sign_detector.trained_bank'
-TRAINED_BANK_VERSION = 1
+TRAINED_BANK_VERSION = 2
 #: The bank shipped with the package.
 DEFAULT_BANK_FILE = Path(__file__).resolve().parent / 'data' / 'default_bank.npz'
 #: ``classifier.bank_file`` value for the rendered templates alone (no trained bank).
@@ -67,7 +67,9 @@ def save_trained_bank(path: Path, bank: TrainedBank) -> None:
     arrays: dict[str, np.ndarray] = {}
     if bank.second_opinion is not None:
         opinion = bank.second_opinion
-        arrays.update(opinion_labels=np.asarray(opinion.labels), feature_mean=opinion.feature_mean,
+        arrays.update(opinion_labels=np.asarray(opinion.labels),
+                      opinion_real_labels=np.asarray(opinion.real_labels),
+                      feature_mean=opinion.feature_mean,
                       feature_scale=opinion.feature_scale,
                       weights=opinion.weights.astype(np.float16), bias=opinion.bias)
     for label, examples in bank.class_examples.items():
@@ -91,7 +93,8 @@ def load_trained_bank(path: Path) -> TrainedBank:
                                     arrays['feature_mean'].astype(np.float32),
                                     arrays['feature_scale'].astype(np.float32),
                                     arrays['weights'].astype(np.float32),
-                                    arrays['bias'].astype(np.float32))
+                                    arrays['bias'].astype(np.float32),
+                                    tuple(str(n) for n in arrays['opinion_real_labels']))
             if opinion.weights.shape != (opinion.feature_mean.size, len(opinion.labels)):
                 raise ValueError(f'weights of shape {opinion.weights.shape} do not fit '
                                  f'{opinion.feature_mean.size} features and '

@@ -282,7 +282,8 @@ def train_from_located(located: LocatedCrops, config: TrainingConfig,
         counts = Counter(feature_labels)
         weights = np.asarray([len(feature_labels) / (len(counts) * counts[label])
                               for label in feature_labels])
-        opinion = fit_second_opinion(features, feature_labels, config.ridge, weights)
+        opinion = fit_second_opinion(features, feature_labels, config.ridge, weights,
+                                     real_labels=sorted(set(found_labels)))
     counts_by_label = Counter(labels)
     record = dict(provenance or {})
     record.update(crops=len(labels), located=int(found.sum()),

@@ -86,7 +86,10 @@ from speed_sign_detector.bag_io import BagReader, header_stamp_ns
 from speed_sign_detector.config import PipelineConfig, load_yaml
 from speed_sign_detector.errors import ImageConversionError, SpeedSignError
 from speed_sign_detector.recognition.classifier import LABEL_END_OF_LIMIT
-from speed_sign_detector.tools.output_paths import prepare_output_bag, prepare_output_file
+from speed_sign_detector.tools.output_paths import (
+    prepare_output_bag,
+    prepare_output_file,
+)
 from speed_sign_detector.tools.run_control import (
     EXIT_INTERRUPTED,
     ItemProgress,

@@ -32,7 +32,6 @@ over an empty group are null.
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import logging
 import sys
@@ -45,8 +44,12 @@ from typing import Any
 import numpy as np
 
 from speed_sign_detector.config import ClassifierConfig, load_yaml
-from speed_sign_detector.errors import TruthFileError
+from speed_sign_detector.errors import TrainingDataError, TruthFileError
 from speed_sign_detector.recognition.classifier import Classification, Classifier
+from speed_sign_detector.recognition.labelled_crops import (
+    LABELS_HEADER,
+    read_label_rows,
+)
 from speed_sign_detector.tools.image_files import (
     UnreadableImage,
     UnreadableImageError,
@@ -73,7 +76,6 @@ GTSRB_LOOKALIKE_NAMES: dict[int, str] = {
     41: 'end_of_no_passing', 42: 'end_of_no_passing_over_3.5t'}
 #: Upper bounds (exclusive) of the sign-size bins, pixels of the ROI width.
 SIZE_BINS_PX: tuple[int, ...] = (20, 25, 30, 40, 50, 70, 10_000)
-LABELS_HEADER = 'Filename;Width;Height;Roi.X1;Roi.Y1;Roi.X2;Roi.Y2;ClassId'
 
 
 @dataclass(frozen=True)
@@ -119,26 +121,14 @@ def read_labels(folder: Path, include_lookalikes: bool = False
     """
     path = folder / 'labels.csv'
     try:
-        with path.open(newline='') as handle:
-            text = handle.read()
-    except (OSError, UnicodeDecodeError) as err:
-        raise TruthFileError(f'cannot read {path}: {err}') from err
-    if not text.strip():
-        raise TruthFileError(f'{path} is empty: expected the header {LABELS_HEADER} and one '
-                             f'row per crop')
-    rows = list(csv.DictReader(text.splitlines(), delimiter=';'))
-    if not rows:
-        raise TruthFileError(f'{path} has a header but no rows (one row per crop expected)')
+        rows = read_label_rows(folder)
+    except TrainingDataError as err:
+        raise TruthFileError(str(err)) from err
     labels: list[CropLabel] = []
     skipped = 0
-    for number, row in enumerate(rows, start=2):
-        try:
-            class_id = int(row['ClassId'])
-            label = CropLabel(folder / row['Filename'], int(row['Roi.X1']), int(row['Roi.Y1']),
-                              int(row['Roi.X2']), int(row['Roi.Y2']), class_id)
-        except (KeyError, TypeError, ValueError) as err:
-            raise TruthFileError(f'{path}:{number}: malformed row {row!r} ({err}); expected '
-                                 f'{LABELS_HEADER}') from err
+    for row in rows:
+        class_id = row.class_id
+        label = CropLabel(folder / row.filename, *row.roi, class_id)
         if (class_id in GTSRB_LIMITS_KMH or class_id == GTSRB_END_OF_80
                 or (include_lookalikes and label.is_lookalike)):
             labels.append(label)

@@ -51,7 +51,6 @@ from speed_sign_detector.tools.run_control import (
     stop_on_interrupt,
 )
 
-
 #: GTSDB class id -> speed limit in km/h (class 6, end of 80, is not a limit).
 SPEED_LIMIT_CLASSES: dict[int, int] = {0: 20, 1: 30, 2: 50, 3: 60, 4: 70, 5: 80, 7: 100,
                                        8: 120}

@@ -41,7 +41,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from speed_sign_detector.tools.eval_bag import summary_json, sum_drive_metrics
+from speed_sign_detector.tools.eval_bag import sum_drive_metrics, summary_json
 from speed_sign_detector.tools.fleet_jobs import BagOutcome, FleetError
 
 #: Longest bag name shown in the table, characters.

@@ -256,12 +256,12 @@ def main(argv: list[str] | None = None) -> int:
     """Run ``speed_sign_monitor``; returns the exit status."""
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
-        import rclpy
-        from rclpy.executors import ExternalShutdownException
-        from rclpy.utilities import remove_ros_args
         import diagnostic_msgs.msg  # noqa: F401 - checked here, used by _Monitor
+        import rclpy
         import sensor_msgs.msg  # noqa: F401
         import std_msgs.msg  # noqa: F401
+        from rclpy.executors import ExternalShutdownException
+        from rclpy.utilities import remove_ros_args
     except ImportError as err:
         from speed_sign_detector.ros.entry_point import missing_ros_message
         print(missing_ros_message('speed_sign_monitor', err), file=sys.stderr)

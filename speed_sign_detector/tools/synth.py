@@ -42,7 +42,10 @@ from speed_sign_detector.synthetic import (
     SyntheticDrive,
     SyntheticFrame,
 )
-from speed_sign_detector.tools.output_paths import prepare_output_bag, prepare_output_file
+from speed_sign_detector.tools.output_paths import (
+    prepare_output_bag,
+    prepare_output_file,
+)
 from speed_sign_detector.tools.progress import progress_bar
 from speed_sign_detector.truth import TruthRow, write_truth
 
