@@ -4,6 +4,7 @@ Example::
 
     speed_sign_synth drive_day --truth drive_day.csv --seed 1 --duration 20 --fps 30
     speed_sign_synth drive_night.bag --format ros1 --lighting night --compressed
+    speed_sign_synth approach ../shared/data/gtsdb-dev approach_bag --truth approach.csv
 
 The scene (road, signs, look-alikes, distractors, lighting, blur, noise) is described
 in :mod:`speed_sign_detector.synthetic`, the truth format in
@@ -121,7 +122,15 @@ def write_drive(frames: Iterable[SyntheticFrame], out_bag: Path, bag_format: str
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run ``speed_sign_synth``; returns the exit status."""
+    """Run ``speed_sign_synth``; returns the exit status.
+
+    ``speed_sign_synth approach SCENES_DIR OUT_BAG ...`` makes approach sequences from
+    real scenes instead (:mod:`speed_sign_detector.tools.synth_approach`).
+    """
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ['approach']:
+        from speed_sign_detector.tools import synth_approach
+        return synth_approach.main(argv[1:])
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO, format='%(levelname)s %(name)s: %(message)s',
                         stream=sys.stderr)
