@@ -178,9 +178,14 @@ class CropWindow:
         return (x_px - self.left_px) * self.zoom, (y_px - self.top_px) * self.zoom
 
     def affine(self) -> np.ndarray:
-        """The (2, 3) float64 scene-to-output matrix for ``cv2.warpAffine``."""
-        return np.array([[self.zoom, 0.0, -self.zoom * self.left_px],
-                         [0.0, self.zoom, -self.zoom * self.top_px]])
+        """The (2, 3) float64 scene-to-output matrix for ``cv2.warpAffine``.
+
+        Boxes use edge coordinates (pixel ``i`` spans ``[i, i + 1)``), OpenCV pixel
+        centres (pixel ``i`` is at ``i``): the half-pixel shifts make the mapped truth
+        boxes land exactly on the resampled pixels.
+        """
+        return np.array([[self.zoom, 0.0, self.zoom * (0.5 - self.left_px) - 0.5],
+                         [0.0, self.zoom, self.zoom * (0.5 - self.top_px) - 0.5]])
 
 
 @dataclass(frozen=True)
