@@ -48,12 +48,15 @@ class LimitSignPassing:
         passed_stamp_s: its last visible frame, when its value comes into force, seconds.
         limit_kmh: the value it sets, km/h; 0 for an end-of-limit sign.
         track_id: its truth track id.
+        last_radius_px: its radius in its last visible frame, pixels (of signs passed
+            at the same frame, the largest, nearest one is passed last and rules).
     """
 
     first_stamp_s: float
     passed_stamp_s: float
     limit_kmh: int
     track_id: int
+    last_radius_px: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -76,10 +79,11 @@ class LimitTimeScore:
 def limit_sign_passings(tracks: Sequence[TruthTrack]) -> tuple[LimitSignPassing, ...]:
     """The truth's limit-setting signs (limits and end-of-limit signs), in passing order."""
     passings = [LimitSignPassing(track.first_stamp_s, track.last_stamp_s, track.limit_kmh,
-                                 track.track_id)
+                                 track.track_id, track.rows[-1].radius_px)
                 for track in tracks
                 if track.limit_kmh > 0 or track.kind.startswith(END_OF_LIMIT_KIND_PREFIX)]
-    passings.sort(key=lambda passing: (passing.passed_stamp_s, passing.track_id))
+    passings.sort(key=lambda passing: (passing.passed_stamp_s, passing.last_radius_px,
+                                       passing.track_id))
     return tuple(passings)
 
 
@@ -132,7 +136,7 @@ def score_time_in_limit(tracks: Sequence[TruthTrack], frame_stamps_s: Sequence[f
         if published == in_force:
             exact_s += duration_s
             acceptable_s += duration_s
-        elif published == _announced_kmh(passings, stamp_s, tolerance_s):
+        elif published in _announced_kmh(passings, stamp_s, tolerance_s):
             acceptable_s += duration_s
     if judged_s <= 0.0:
         return LimitTimeScore(None, None, 0.0)
@@ -140,10 +144,14 @@ def score_time_in_limit(tracks: Sequence[TruthTrack], frame_stamps_s: Sequence[f
 
 
 def _announced_kmh(passings: Sequence[LimitSignPassing], stamp_s: float,
-                   tolerance_s: float) -> int | None:
-    """Value of the next sign to be passed when it is in view at ``stamp_s``, else None."""
-    upcoming = next((passing for passing in passings
-                     if passing.passed_stamp_s > stamp_s + tolerance_s), None)
-    if upcoming is None or upcoming.first_stamp_s > stamp_s + tolerance_s:
-        return None
-    return upcoming.limit_kmh
+                   tolerance_s: float) -> set[int]:
+    """Values of the next signs to be passed (those passed at the earliest upcoming
+    stamp) that are in view at ``stamp_s``; empty when none is."""
+    upcoming = [passing for passing in passings
+                if passing.passed_stamp_s > stamp_s + tolerance_s]
+    if not upcoming:
+        return set()
+    next_stamp_s = upcoming[0].passed_stamp_s
+    return {passing.limit_kmh for passing in upcoming
+            if passing.passed_stamp_s <= next_stamp_s + 1e-9
+            and passing.first_stamp_s <= stamp_s + tolerance_s}

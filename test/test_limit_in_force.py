@@ -86,3 +86,17 @@ def test_no_limit_sign_passed_gives_no_share() -> None:
     tracks = group_tracks(sign(1, 'no_entry', 0, 1.0, 2.0) + sign(2, '60', 60, 8.0, 12.0))
     score = score_time_in_limit(tracks, STAMPS_S, [(9.0, 60)])
     assert score.time_in_correct_limit is None and score.judged_s == 0.0
+
+
+def test_of_signs_passed_together_the_nearest_rules_and_either_may_be_announced() -> None:
+    """Two limit signs leave the view in the same frame (an approach sequence on one sign
+    with a second, smaller one in the scene): the larger, nearer one sets the limit."""
+    near = sign(1, '60', 60, 1.0, 3.0)
+    far = [TruthRow(row.stamp_s, 0, 2, '80', 80, 10.0, 10.0, 16.0, 16.0)
+           for row in sign(2, '80', 80, 1.0, 3.0)]
+    tracks = group_tracks(sign(3, '50', 50, 0.0, 0.5) + far + near)
+    assert limit_in_force_kmh(limit_sign_passings(tracks), 3.0) == 60
+    score = score_time_in_limit(tracks, STAMPS_S[:51], [(0.5, 50), (2.0, 80), (3.0, 60)])
+    assert score.time_in_correct_limit == pytest.approx(1.0)
+    # the 80 announced from 2.0 to 3.0 s is not the limit in force (50)
+    assert score.time_in_correct_limit_strict == pytest.approx(3.5 / 4.5)
