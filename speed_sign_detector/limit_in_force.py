@@ -1,4 +1,4 @@
-"""The speed limit in force along a drive, from its truth, and the time the published limit was right.
+"""The speed limit in force along a drive, and how long the published limit was right.
 
 What a driver experiences is not how many signs were read but whether the limit shown
 is the one in force. This module derives the limit in force from a truth file

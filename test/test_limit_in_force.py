@@ -1,4 +1,4 @@
-"""Limit in force from a truth, and time in correct limit, on hand-made drives with exact answers."""
+"""Limit in force and time in correct limit on hand-made drives with exact answers."""
 from __future__ import annotations
 
 import pytest
