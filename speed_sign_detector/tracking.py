@@ -12,8 +12,17 @@ a label is the sum of its votes inside the window (``window_frames`` frames and
 ``window_s`` seconds of message time, whichever is shorter): an artifact that stays the
 same size for ever never gathers more than a window of unboosted votes. A limit is
 recognized once its evidence reaches ``recognition_threshold`` and holds the majority
-of the track's evidence; each track decides once. The active limit is held until
-another limit or an end-of-limit sign is recognized.
+of the track's evidence; each track decides once.
+
+The active limit follows the sign being passed: among the decided tracks still in the
+table (a speed limit, or end of limit = 0), the **nearest** one, i.e. the one with the
+largest radius, governs, and its value is the active limit; when no decided track is
+left (the signs were passed and their tracks expired), the last value is held. So a far
+sign decided while a nearer decided sign is still in view waits until the nearer one
+has been passed and its track has expired (e.g. a near 30 and a far 20: 30 until the 30
+is passed, then 20), and a far sign decided first gives way to a nearer one once that
+is decided. A lone sign takes effect as soon as it is decided, as before: the display
+announces the sign the driver is looking at.
 
 Tracks expire when unobserved for the same window, so dropped frames do not stretch
 their memory.
@@ -76,7 +85,8 @@ class TrackerUpdate:
 
     Attributes:
         tracks: the table after the frame.
-        active_limit_kmh: the limit in force, 0 when none is known.
+        active_limit_kmh: the limit in force, 0 when none is known: the value of the
+            nearest decided sign still tracked, else the last one held.
         recognized_limit_kmh: a limit recognized in this frame, 0 when none.
         recognized_end_of_limit: True when an end-of-limit sign was recognized now.
         tracks_reset: True when this frame's time jumped back more than
@@ -105,6 +115,9 @@ class _Track:
     votes: deque[tuple[int, float, str, float, float]] = field(default_factory=deque)
     observations: int = 0
     recognized: bool = False
+    #: the limit this track decided, km/h (0 = end of limit); None while undecided or
+    #: when it decided another sign
+    decided_limit_kmh: int | None = None
 
     @property
     def evidence(self) -> dict[str, float]:
@@ -198,13 +211,23 @@ class Tracker:
                 continue
             if decided == LABEL_END_OF_LIMIT:
                 recognized_end = True
-                self.active_limit_kmh = 0
+                track.decided_limit_kmh = 0
             else:
                 recognized_limit_kmh = int(decided)
-                self.active_limit_kmh = recognized_limit_kmh
+                track.decided_limit_kmh = recognized_limit_kmh
+        governing = self._governing_track()
+        if governing is not None and governing.decided_limit_kmh is not None:
+            self.active_limit_kmh = governing.decided_limit_kmh
         return TrackerUpdate(tuple(track.snapshot() for track in self._tracks),
                              self.active_limit_kmh, recognized_limit_kmh, recognized_end,
                              tracks_reset)
+
+    def _governing_track(self) -> _Track | None:
+        """The nearest (largest radius) decided limit or end-of-limit track, if any."""
+        decided = [track for track in self._tracks if track.decided_limit_kmh is not None]
+        if not decided:
+            return None
+        return max(decided, key=lambda track: (track.radius_px, track.last_stamp_s))
 
     def _expire(self, stamp_s: float) -> None:
         config = self.config

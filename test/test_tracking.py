@@ -167,3 +167,44 @@ def test_votes_outside_the_window_are_forgotten() -> None:
         update = tracker.update(index * FRAME_PERIOD_S, [observation('30', 100.0, 100.0, 20.0)])
     assert update.tracks[0].observations == 12
     assert update.tracks[0].evidence == pytest.approx(5 * 10.0)
+
+
+def test_the_nearest_decided_sign_governs_until_it_is_passed() -> None:
+    """A near 30 and a far 20 in view together, both decided: the 30 holds while it is in
+    view (the demo used to show the far 20 while the 30 filled the frame); once the 30
+    has been passed and its track expired, the 20 takes over."""
+    config = TrackerConfig(recognition_threshold=25.0, window_frames=5, window_s=10.0)
+    tracker = Tracker(config)
+    actives = []
+    for index in range(8):   # both signs approach; the 30 is three times nearer
+        update = tracker.update(index * FRAME_PERIOD_S, [
+            observation('30', 400.0 + 6 * index, 150.0, 30.0 + 3 * index),
+            observation('20', 340.0 + index, 180.0, 8.0 + index)])
+        actives.append(update.active_limit_kmh)
+    decided = {track.label for track in update.tracks if track.recognized}
+    assert decided == {'30', '20'}
+    assert actives[1:] == [30] * 7
+    # the 30 leaves the image (passed); its track expires after the 5-frame window
+    for index in range(8, 20):
+        update = tracker.update(index * FRAME_PERIOD_S,
+                                [observation('20', 340.0 + index, 180.0, 8.0 + index)])
+        actives.append(update.active_limit_kmh)
+    assert actives[8:8 + 5] == [30] * 5
+    assert actives[8 + 5:] == [20] * 7
+    # the 20 is passed too: its value is held with no sign in view
+    for index in range(20, 30):
+        update = tracker.update(index * FRAME_PERIOD_S, [])
+    assert update.tracks == () and update.active_limit_kmh == 20
+
+
+def test_a_far_sign_decided_first_gives_way_to_the_nearer_one() -> None:
+    tracker = Tracker(TrackerConfig(recognition_threshold=25.0, window_frames=5))
+    far = [observation('20', 340.0 + index, 180.0, 10.0 + index, psr=20.0)
+           for index in range(6)]
+    near = [observation('30', 400.0 + 6 * index, 150.0, 30.0 + 3 * index, psr=4.0)
+            for index in range(6)]
+    actives = [tracker.update(index * FRAME_PERIOD_S, [far[index], near[index]]
+                              ).active_limit_kmh for index in range(6)]
+    # the far 20 is decided on frame 1 (20 + 30), the near 30 only on frame 4
+    # (4 + 6 + 6 + 6 + 6 = 28): 20 is shown until then, then the nearer 30
+    assert actives == [0, 20, 20, 20, 30, 30]

@@ -51,6 +51,11 @@ Example::
       end-of-limit signs in the truth (kind ``end_of_limit...``), those the pipeline
       recognized as end of limit, and end-of-limit recognitions with no such sign in
       view (each wrongly cancels the active limit).
+  ``time_in_correct_limit``, ``time_in_correct_limit_strict``, ``judged_s``
+      share of the time after the first limit-setting sign was passed in which the
+      published active limit was the limit in force (or announced the next sign while
+      it is in view; strict: the limit in force only), and that time in seconds
+      (:mod:`speed_sign_detector.limit_in_force`).
   ``fps``, ``latency_ms_p50``, ``latency_ms_p95``
       frames per second over the whole run (reading, decoding, pipeline, writing; the
       detection of a frame overlaps the recognition of the one before, as in the node)
@@ -85,6 +90,7 @@ import numpy as np
 from speed_sign_detector.bag_io import BagReader, header_stamp_ns
 from speed_sign_detector.config import PipelineConfig, load_yaml
 from speed_sign_detector.errors import ImageConversionError, SpeedSignError
+from speed_sign_detector.limit_in_force import score_time_in_limit
 from speed_sign_detector.recognition.classifier import LABEL_END_OF_LIMIT
 from speed_sign_detector.tools.output_paths import (
     prepare_output_bag,
@@ -551,6 +557,7 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
                                      score.drive_time_s))
         summary['cut_signs'] = score.cut_signs
         summary['per_sign'] = [asdict(outcome) for outcome in score.outcomes]
+        summary.update(asdict(score_time_in_limit(tracks, stamps_s, limit_changes)))
     return BagEvaluation(summary, stopped_by)
 
 
@@ -611,6 +618,10 @@ def format_report(summary: dict[str, Any]) -> str:
         lines.append(f'end-of-limit signs {summary["end_of_limit_signs"]}, read '
                      f'{summary["end_of_limit_recognized"]}, wrong end-of-limit '
                      f'{summary["wrong_end_of_limits"]}')
+        if summary.get('time_in_correct_limit') is not None:
+            lines.append(f'time in correct limit {100 * summary["time_in_correct_limit"]:.1f} % '
+                         f'of {summary["judged_s"]:.1f} s after the first sign (strict '
+                         f'{100 * summary["time_in_correct_limit_strict"]:.1f} %)')
     p50, p95 = summary['latency_ms_p50'], summary['latency_ms_p95']
     lines.append(f'{summary["frames"]} frames of {summary["topic"]} ({summary["msgtype"]}), '
                  f'{summary["duration_s"]:.1f} s of drive; {summary["fps"]:.1f} fps, latency '

@@ -4,6 +4,7 @@ Example::
 
     speed_sign_synth drive_day --truth drive_day.csv --seed 1 --duration 20 --fps 30
     speed_sign_synth drive_night.bag --format ros1 --lighting night --compressed
+    speed_sign_synth approach ../shared/data/gtsdb-dev approach_bag --truth approach.csv
 
 A ROS 1 bag is a file whose name ends in ``.bag`` (rosbags tells the formats apart by
 it): with ``--format ros1`` the suffix is added when it is missing. A ROS 2 bag is a
@@ -157,7 +158,15 @@ def option_names(message: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run ``speed_sign_synth``; returns the exit status."""
+    """Run ``speed_sign_synth``; returns the exit status.
+
+    ``speed_sign_synth approach SCENES_DIR OUT_BAG ...`` makes approach sequences from
+    real scenes instead (:mod:`speed_sign_detector.tools.synth_approach`).
+    """
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ['approach']:
+        from speed_sign_detector.tools import synth_approach
+        return synth_approach.main(argv[1:])
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO, format='%(levelname)s %(name)s: %(message)s',
                         stream=sys.stderr)
