@@ -48,6 +48,10 @@ def last_json(stdout: str) -> dict[str, Any]:
     return json.loads(lines[-1])
 
 
+#: How long to wait for the tool's 'interrupted' message before feeding the pipe, s.
+SIGNAL_WAIT_S = 5.0
+
+
 def _open_writer_when_read(fifo: Path, process: subprocess.Popen[str]) -> int:
     """Open ``fifo`` for writing once the tool has opened it for reading."""
     deadline = time.monotonic() + DEADLINE_S
@@ -86,8 +90,16 @@ def interrupt_at_fifo(command: list[str], fifo: Path, payload: bytes
     try:
         writer = _open_writer_when_read(fifo, process)
         process.send_signal(signal.SIGINT)
+        # The kernel may hand the signal to any of the tool's threads (OpenCV's, BLAS's);
+        # then Python runs the handler only once the main thread's blocking read of the
+        # pipe returns. Either way the handler has run before the read returns to the
+        # tool's loop, so after a short wait for the message the payload is fed anyway.
+        deadline = time.monotonic() + SIGNAL_WAIT_S
         while not any('interrupted' in line for line in seen):
-            line = stderr_lines.get(timeout=DEADLINE_S)
+            try:
+                line = stderr_lines.get(timeout=max(deadline - time.monotonic(), 0.01))
+            except queue.Empty:
+                break
             assert line is not None, 'the tool ended without saying it was interrupted:\n' + \
                 ''.join(seen)
             seen.append(line)

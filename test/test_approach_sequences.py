@@ -108,16 +108,6 @@ def test_sequences_close_in_on_each_limit_sign_and_truth_matches_the_pixels(
                for a, b in zip(frames, again))
 
 
-@pytest.fixture(scope='module')
-def bank_config(pytestconfig: pytest.Config, tmp_path_factory: pytest.TempPathFactory
-                ) -> Path:
-    """A node parameter file caching the classifier's filter banks between runs."""
-    cache_dir = pytestconfig.cache.mkdir('speed_sign_filter_banks')
-    path = tmp_path_factory.mktemp('config') / 'params.yaml'
-    path.write_text(f'classifier:\n  cache_dir: "{cache_dir}"\n')
-    return path
-
-
 def synth_and_grade(capsys: pytest.CaptureFixture[str], bank_config: Path, scenes: Path,
                     out: Path, *options: str) -> dict[str, Any]:
     """``speed_sign_synth approach`` then ``speed_sign_eval bag --truth --json``."""

@@ -9,9 +9,7 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
-import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -19,6 +17,7 @@ from pathlib import Path
 
 import pytest
 import rclpy
+from cli_helpers import tool
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
@@ -36,16 +35,6 @@ FRAMES = 12
 CONFIG = DriveConfig(seed=2, duration_s=FRAMES / 6, fps=6, width_px=320, height_px=240,
                      focal_px=380.0)
 TOPIC = '/camera/image_raw'
-
-
-def tool(name: str) -> list[str]:
-    """Command line of an installed tool (the venv's entry point, else python -c main)."""
-    script = Path(sys.executable).with_name(name)
-    if script.exists():
-        return [str(script)]
-    found = shutil.which(name)
-    assert found, f'{name} is not installed (pip install -e . makes the entry points)'
-    return [found]
 
 
 @pytest.fixture(scope='module')

@@ -643,6 +643,17 @@ def format_report(summary: dict[str, Any]) -> str:
     return '\n'.join(lines)
 
 
+def add_pipeline_options(parser: argparse.ArgumentParser) -> None:
+    """The options of ``eval bag`` and ``eval fleet`` that set the pipeline and the grading:
+    ``--config``, ``--backend``, ``--grace``."""
+    parser.add_argument('--config', type=Path, help='parameter YAML file of the node')
+    parser.add_argument('--backend', choices=('auto', 'gl', 'numpy'),
+                        help='voting backend (overrides --config)')
+    parser.add_argument('--grace', type=float, default=DEFAULT_GRACE_S,
+                        help=f'seconds after a sign leaves the image within which '
+                        f'recognizing it still counts (default {DEFAULT_GRACE_S:g})')
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``bag`` subcommand to ``speed_sign_eval``."""
     parser = subparsers.add_parser(
@@ -667,12 +678,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument('--contact-sheet', type=Path, metavar='PNG',
                         help='write the drive at a glance as one picture (.png or .jpg): '
                         'frames around the limit changes, with time and active limit')
-    parser.add_argument('--config', type=Path, help='parameter YAML file of the node')
-    parser.add_argument('--backend', choices=('auto', 'gl', 'numpy'),
-                        help='voting backend (overrides --config)')
-    parser.add_argument('--grace', type=float, default=DEFAULT_GRACE_S,
-                        help=f'seconds after a sign leaves the image within which '
-                        f'recognizing it still counts (default {DEFAULT_GRACE_S:g})')
+    add_pipeline_options(parser)
     parser.add_argument('--json', action='store_true',
                         help='print the summary as one JSON object (last stdout line)')
     parser.set_defaults(run=run)

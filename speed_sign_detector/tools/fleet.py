@@ -42,7 +42,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from speed_sign_detector.config import PipelineConfig, load_yaml
-from speed_sign_detector.tools.eval_bag import DEFAULT_GRACE_S
+from speed_sign_detector.tools.eval_bag import add_pipeline_options
 from speed_sign_detector.tools.fleet_jobs import (
     BagJob,
     BagOutcome,
@@ -361,12 +361,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help='GPU share per worker (default: the cluster\'s GPUs divided '
                         'among the workers, at most 1; 0 without GPUs)')
     parser.add_argument('--topic', help='image topic (needed when a bag has several)')
-    parser.add_argument('--config', type=Path, help='parameter YAML file of the node')
-    parser.add_argument('--backend', choices=('auto', 'gl', 'numpy'),
-                        help='voting backend (overrides --config)')
-    parser.add_argument('--grace', type=float, default=DEFAULT_GRACE_S,
-                        help=f'seconds after a sign leaves the image within which '
-                        f'recognizing it still counts (default {DEFAULT_GRACE_S:g})')
+    add_pipeline_options(parser)
     parser.add_argument('--debug-images', action='store_true',
                         help='also write /debug_image into the results bags')
     parser.add_argument('--json', action='store_true',

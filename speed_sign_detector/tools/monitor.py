@@ -17,8 +17,9 @@ the last state as ``final state: ...``. "transport (stamp to receipt)" is the ti
 the image's header stamp to its arrival at the node: transport only, processing is
 shown apart. A node whose stream ended shows as idle.
 
-``--once`` waits until all three topics were heard, or the limit and two diagnostics
-reports of a node whose stream has ended (or ``--timeout`` passes), prints one snapshot
+``--once`` waits until all three topics were heard and a diagnostics report counts
+processed frames, or the limit and two diagnostics reports of a node whose stream has
+ended (or ``--timeout`` passes), prints one snapshot
 and exits. Exit status 1 with a message when nothing at all was published
 within ``--timeout`` seconds (is the node running, in the same ROS_DOMAIN_ID?).
 ROS arguments (``--ros-args -r speed_limit:=/car/speed_limit``) are accepted.
@@ -293,13 +294,15 @@ def _print_snapshot(snapshot: MonitorSnapshot, args: argparse.Namespace,
 
 
 def _once_complete(monitor: _Monitor) -> bool:
-    """--once: every topic heard, or the node's stream has ended (limit and two
-    diagnostics reports heard, which say it processed frames but is idle now: no
-    candidates will come)."""
+    """--once: every topic heard and a diagnostics report that counts the frames behind
+    the candidates (an earlier report may predate the first frame), or the node's stream
+    has ended (limit and two diagnostics reports heard, which say it processed frames
+    but is idle now: no candidates will come)."""
     snapshot = monitor.snapshot
-    return monitor.heard_all() or (snapshot.messages['speed_limit'] > 0
-                                   and snapshot.messages['diagnostics'] >= 2
-                                   and snapshot.is_idle())
+    serving = monitor.heard_all() and (snapshot.frames_processed or 0) > 0
+    return serving or (snapshot.messages['speed_limit'] > 0
+                       and snapshot.messages['diagnostics'] >= 2
+                       and snapshot.is_idle())
 
 
 def _run(node: Any, monitor: _Monitor, args: argparse.Namespace) -> int:

@@ -16,7 +16,8 @@ timing (record-time gaps divided by ``--rate``):
 
 The topic is published under its recorded name, or ``--publish-as NAME``. By default
 the publisher waits up to ``--wait`` seconds for a subscriber before the first message,
-so a node started at the same time sees the whole drive. QoS: reliable, keep last
+then half a second for the subscriber's side of discovery, so a node started at the same
+time sees the whole drive. QoS: reliable, keep last
 ``--depth`` (compatible with the node's best-effort sensor-data subscription); pass
 ``--best-effort`` for sensor-data QoS. ROS arguments (``--ros-args -r ...``) are accepted.
 """
@@ -36,6 +37,10 @@ from speed_sign_detector.bag_io import (
     header_stamp_ns,
 )
 from speed_sign_detector.errors import BagError, SpeedSignError
+
+#: After a subscriber appears, how long the publisher waits for the subscriber's side of
+#: discovery before the first message, seconds.
+DISCOVERY_SETTLE_S = 0.5
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -113,6 +118,12 @@ def _play(bag: BagReader, topic: str, msgtype: str, args: argparse.Namespace) ->
         if publisher.get_subscription_count() == 0 and args.wait > 0:
             node.get_logger().warning(f'no subscriber on {publisher.topic_name} after '
                                       f'{args.wait:g} s; playing anyway')
+        elif args.wait > 0:
+            # The publisher sees the subscriber before the subscriber has matched the
+            # publisher; DDS drops what is sent in between (the first frames, even reliable).
+            end = time.monotonic() + DISCOVERY_SETTLE_S
+            while time.monotonic() < end:
+                rclpy.spin_once(node, timeout_sec=0.05)
         total = 0
         passes = 0
         while True:
