@@ -280,7 +280,9 @@ def test_second_opinion_chooses_only_among_ranked_real_labels() -> None:
     # a label learned from renderings only is never its choice over a real one
     rendered_best = np.asarray([0.1, -0.5, -0.5, 0.9, -1.0])
     assert opinion.choose(rendered_best, ['30', '130'], 2, 0.2) == '30'
-    # the correlation's rendered-only winner stands, unless the model reads another limit
+    # the correlation's rendered-only winner stands only where the model reads it too
     assert opinion.choose(rendered_best, ['130', '30'], 2, 0.2) == '130'
     assert opinion.choose(scores, ['130', '30'], 2, 0.2) is None
+    unsure = np.asarray([0.1, 0.0, 0.0, -0.1, 0.2])   # the model reads no limit at all
+    assert opinion.choose(unsure, ['130', '30'], 2, 0.2) is None
     assert opinion.choose(scores, [], 2, 0.2) is None

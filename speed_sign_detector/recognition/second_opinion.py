@@ -5,8 +5,8 @@ It never adds a class: it picks one of the correlation's ``candidates`` leading 
 and only when it agrees that this label is the best of the labels it has real examples
 of, with a lead of at least ``min_lead``. A class it has no real examples of (a limit
 such as 130 km/h, learned from renderings only) is never its choice: when the
-correlation filters rank such a class first, their answer stands, unless the model
-confidently reads another limit there, in which case the answer is withheld.
+correlation filters rank such a class first, their answer stands only where the model
+scores that class highest too; otherwise the answer is withheld.
 
 The model is ridge regression onto +-1 class indicators (one-vs-rest), solved in closed
 form with numpy on standardised :mod:`.sign_features`; its scores are comparable across
@@ -71,13 +71,9 @@ class SecondOpinion:
             return None
         order = np.argsort(-scores)
         if distinct[0] not in self.real_labels:
-            # no real examples of the correlation's winner: it stands unless the model
-            # confidently reads another limit
-            model_best = self.labels[int(order[0])]
-            lead = float(scores[order[0]] - scores[order[1]]) if len(order) > 1 else np.inf
-            if model_best.isdigit() and model_best != distinct[0] and lead >= min_lead:
-                return None
-            return distinct[0]
+            # no real examples of the correlation's winner: it stands only where the
+            # model, which learned it from renderings, reads it too
+            return distinct[0] if self.labels[int(order[0])] == distinct[0] else None
         real = [int(i) for i in order if self.labels[int(i)] in self.real_labels]
         model_best = self.labels[real[0]]
         lead = float(scores[real[0]] - scores[real[1]]) if len(real) > 1 else np.inf
