@@ -23,7 +23,7 @@ from speed_sign_detector.recognition.bank_file import load_bank_file, save_bank_
 from speed_sign_detector.recognition.classifier import Classifier, crop_sign_radius
 from speed_sign_detector.recognition.filter_banks import bank_radii, build_banks
 from speed_sign_detector.recognition.labelled_crops import read_crop_folder, track_folds
-from speed_sign_detector.recognition.second_opinion import SecondOpinion
+from speed_sign_detector.recognition.second_opinion import RENDERED_ONLY_MIN_SCORE, SecondOpinion
 from speed_sign_detector.recognition.templates import LIMIT_VALUES_KMH, render_sign
 from speed_sign_detector.recognition.trained_bank import (
     TRAINED_BANK_FORMAT,
@@ -285,4 +285,8 @@ def test_second_opinion_chooses_only_among_ranked_real_labels() -> None:
     assert opinion.choose(scores, ['130', '30'], 2, 0.2) is None
     unsure = np.asarray([0.1, 0.0, 0.0, -0.1, 0.2])   # the model reads no limit at all
     assert opinion.choose(unsure, ['130', '30'], 2, 0.2) is None
+    # ... and not as "rather not 130": best, but below the floor of its score
+    rather_not = np.asarray([-0.9, -0.9, -0.9, RENDERED_ONLY_MIN_SCORE - 0.1, -0.9])
+    assert opinion.choose(rather_not, ['130', '30'], 2, 0.2) is None
+    assert opinion.choose(rather_not + 0.2, ['130', '30'], 2, 0.2) == '130'
     assert opinion.choose(scores, [], 2, 0.2) is None
