@@ -263,6 +263,7 @@ def main(argv: list[str] | None = None) -> int:
         except subprocess.TimeoutExpired:
             node_process.kill()
         executor.shutdown()
+        spinner.join(timeout=10)   # a spinning thread left at exit aborts the process
         client.destroy_node()
         rclpy.try_shutdown()
     summary = {
