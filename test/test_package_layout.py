@@ -22,14 +22,16 @@ def colcon_install(tmp_path_factory: pytest.TempPathFactory) -> Path:
     colcon = Path(sys.executable).parent / 'colcon'
     if not colcon.exists():
         found = shutil.which('colcon')
-        assert found, 'colcon is not installed: `pip install .[test]` brings colcon-core and colcon-ros'
+        assert found, ('colcon is not installed: `pip install .[test]` brings colcon-core '
+                       'and colcon-ros')
         colcon = Path(found)
     workspace = tmp_path_factory.mktemp('colcon_ws')
     shutil.copytree(PROJECT_ROOT, workspace / 'src' / 'speed_sign_detector',
                     ignore=SKIPPED_WHEN_COPYING)
     completed = subprocess.run([str(colcon), 'build'], cwd=workspace, capture_output=True,
                                text=True, timeout=300, check=False)
-    assert completed.returncode == 0, f'colcon build failed:\n{completed.stdout}\n{completed.stderr}'
+    assert completed.returncode == 0, \
+        f'colcon build failed:\n{completed.stdout}\n{completed.stderr}'
     return workspace / 'install'
 
 

@@ -129,7 +129,8 @@ class Detector:
 
         Returns:
             one (H_level, W_level, CHANNELS) float32 array per band of ``self.bands``:
-            channels ``(sum w, count)`` with ``w = 1 / distance`` (see :mod:`.voting_numpy`). Band ``b`` is at pyramid level ``self.bands[b].level``.
+            channels ``(sum w, count)`` with ``w = 1 / distance`` (see
+            :mod:`.voting_numpy`). Band ``b`` is at pyramid level ``self.bands[b].level``.
         """
         frame = self._check(gray)
         if self._gl is not None:

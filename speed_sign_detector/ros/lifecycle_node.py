@@ -90,19 +90,18 @@ class ManagedSpeedSignDetectorNode(DetectorNodeBase, LifecycleNode):
 
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Release the pipeline (GL context, banks) and the publishers."""
-        try:
-            self._release()
-        except Exception as err:  # noqa: BLE001 - rclpy would swallow it silently
-            self.get_logger().error(f'cleanup failed: {type(err).__name__}: {err}')
-            return TransitionCallbackReturn.FAILURE
-        return TransitionCallbackReturn.SUCCESS
+        return self._release_for('cleanup')
 
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Release everything, from whichever state."""
+        return self._release_for('shutdown')
+
+    def _release_for(self, transition: str) -> TransitionCallbackReturn:
+        """Release everything; a failure is logged and fails ``transition``."""
         try:
             self._release()
         except Exception as err:  # noqa: BLE001 - rclpy would swallow it silently
-            self.get_logger().error(f'shutdown failed: {type(err).__name__}: {err}')
+            self.get_logger().error(f'{transition} failed: {type(err).__name__}: {err}')
             return TransitionCallbackReturn.FAILURE
         return TransitionCallbackReturn.SUCCESS
 

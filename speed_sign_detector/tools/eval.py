@@ -24,8 +24,8 @@ import logging
 import sys
 
 from speed_sign_detector import __version__
-from speed_sign_detector.errors import SpeedSignError
 from speed_sign_detector.tools import eval_bag, eval_crops, eval_scenes, fleet
+from speed_sign_detector.tools.run_control import run_subcommand
 
 SUBCOMMAND_MODULES = (eval_scenes, eval_crops, eval_bag, fleet)
 
@@ -50,14 +50,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
                         format='%(levelname)s %(name)s: %(message)s', stream=sys.stderr)
-    try:
-        return int(args.run(args))
-    except SpeedSignError as err:
-        print(f'speed_sign_eval {args.command}: error: {err}', file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print(f'speed_sign_eval {args.command}: interrupted', file=sys.stderr)
-        return 130
+    return run_subcommand('speed_sign_eval', args)
 
 
 if __name__ == '__main__':

@@ -12,7 +12,8 @@ sign of that value (background, another sign such as end of 80, or a misread val
 Output (``--json``: one JSON object as the last stdout line): ``frames``, ``signs``,
 ``found``, ``candidate_recall``, ``ms_per_frame`` (everything per frame: reading,
 conversion, detection, scoring), ``detector_ms_per_frame`` (``Detector.detect`` alone),
-``backend``, ``renderer``, ``vote_method``, ``max_candidates``, ``recall_by_size`` (per sign radius range),
+``backend``, ``renderer``, ``vote_method``, ``max_candidates``, ``recall_by_size`` (per
+sign radius range),
 ``radius_ratio_median`` (candidate radius / box radius over the found signs: the
 detector reports the radius of the edge that voted, mostly the inner edge of the ring);
 with classification: ``recognized``, ``recognition_recall``, ``false_limits``,

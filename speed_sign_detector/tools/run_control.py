@@ -9,6 +9,7 @@
 """
 from __future__ import annotations
 
+import argparse
 import logging
 import signal
 import sys
@@ -18,6 +19,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from types import FrameType
 
+from speed_sign_detector.errors import SpeedSignError
 from speed_sign_detector.tools.progress import progress_bar
 
 __all__ = ['EXIT_INTERRUPTED', 'ItemProgress', 'StopRequest', 'stop_on_interrupt']
@@ -96,3 +98,16 @@ class ItemProgress:
         """End the bar (leaves it on screen)."""
         self._bar.close()
 
+
+def run_subcommand(program: str, args: argparse.Namespace) -> int:
+    """Run the subcommand ``args.run`` chose; a :class:`SpeedSignError` becomes one line
+    ``PROGRAM COMMAND: error: ...`` and exit status 1, Ctrl-C outside a
+    :func:`stop_on_interrupt` block one line and :data:`EXIT_INTERRUPTED`."""
+    try:
+        return int(args.run(args))
+    except SpeedSignError as err:
+        print(f'{program} {args.command}: error: {err}', file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f'{program} {args.command}: interrupted', file=sys.stderr)
+        return EXIT_INTERRUPTED

@@ -33,6 +33,7 @@ from speed_sign_detector.recognition.training import (
     train_bank,
 )
 from speed_sign_detector.tools.progress import progress_bar
+from speed_sign_detector.tools.run_control import run_subcommand
 
 _DEFAULTS = TrainingConfig()
 
@@ -178,14 +179,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO, format='%(levelname)s %(name)s: %(message)s',
                         stream=sys.stderr)
-    try:
-        return int(args.run(args))
-    except SpeedSignError as err:
-        print(f'speed_sign_train {args.command}: error: {err}', file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print(f'speed_sign_train {args.command}: interrupted', file=sys.stderr)
-        return 130
+    return run_subcommand('speed_sign_train', args)
 
 
 if __name__ == '__main__':
