@@ -20,10 +20,18 @@ from scene_helpers import textured_background
 from speed_sign_detector.config import ClassifierConfig
 from speed_sign_detector.errors import BankFileError, TrainingDataError
 from speed_sign_detector.recognition.bank_file import load_bank_file, save_bank_file
-from speed_sign_detector.recognition.classifier import Classifier, crop_sign_radius
+from speed_sign_detector.recognition.classifier import (
+    LABEL_END_OF_LIMIT,
+    Classifier,
+    crop_sign_radius,
+)
 from speed_sign_detector.recognition.filter_banks import bank_radii, build_banks
 from speed_sign_detector.recognition.labelled_crops import read_crop_folder, track_folds
-from speed_sign_detector.recognition.second_opinion import RENDERED_ONLY_MIN_SCORE, SecondOpinion
+from speed_sign_detector.recognition.second_opinion import (
+    END_OF_LIMIT_LABEL,
+    RENDERED_ONLY_MIN_SCORE,
+    SecondOpinion,
+)
 from speed_sign_detector.recognition.templates import LIMIT_VALUES_KMH, render_sign
 from speed_sign_detector.recognition.trained_bank import (
     TRAINED_BANK_FORMAT,
@@ -290,3 +298,16 @@ def test_second_opinion_chooses_only_among_ranked_real_labels() -> None:
     assert opinion.choose(rather_not, ['130', '30'], 2, 0.2) is None
     assert opinion.choose(rather_not + 0.2, ['130', '30'], 2, 0.2) == '130'
     assert opinion.choose(scores, [], 2, 0.2) is None
+
+
+def test_second_opinion_never_turns_a_limit_into_an_end_of_limit() -> None:
+    assert END_OF_LIMIT_LABEL == LABEL_END_OF_LIMIT
+    opinion = _opinion(('20', '30', END_OF_LIMIT_LABEL, 'other_sign'),
+                       ('20', '30', END_OF_LIMIT_LABEL, 'other_sign'))
+    reads_end = np.asarray([-0.6, -0.9, 0.8, -0.9])
+    # the correlation read 20 first: the model's end of limit withholds the answer
+    assert opinion.choose(reads_end, ['20', END_OF_LIMIT_LABEL], 2, 0.2) is None
+    # it confirms an end of limit the correlation read, or one over an unknown sign
+    assert opinion.choose(reads_end, [END_OF_LIMIT_LABEL, '20'], 2, 0.2) == END_OF_LIMIT_LABEL
+    assert opinion.choose(reads_end, ['other_sign', END_OF_LIMIT_LABEL], 2,
+                          0.2) == END_OF_LIMIT_LABEL

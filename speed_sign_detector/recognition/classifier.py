@@ -431,7 +431,10 @@ class Classifier:
         runner_up = next((p for (_, p), name in zip(evidence.ranked, labels) if name != label),
                          -np.inf)
         margin = psr - runner_up if math.isfinite(runner_up) else psr
-        if opinion is None and label.isdigit() and margin < config.min_margin:
+        if margin < config.min_margin and (opinion is None and label.isdigit()
+                                           or label == LABEL_END_OF_LIMIT):
+            # a limit on the filters alone, and always an end of limit (which drops the
+            # limit in force), needs the filters' clear lead
             withhold = True
         if withhold:
             return Classification(LABEL_NO_SIGN, None, psr, size_radius, roll, margin,

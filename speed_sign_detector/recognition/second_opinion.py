@@ -7,7 +7,8 @@ of, with a lead of at least ``min_lead``. A class it has no real examples of (a 
 such as 130 km/h, learned from renderings only) is never its choice: when the
 correlation filters rank such a class first, their answer stands only where the model
 scores that class highest too, at least :data:`RENDERED_ONLY_MIN_SCORE`; otherwise the
-answer is withheld.
+answer is withheld. Nor does it turn a limit the correlation read first into an end of
+limit (which would drop the limit in force): it withholds the answer instead.
 
 The model is ridge regression onto +-1 class indicators (one-vs-rest), solved in closed
 form with numpy on standardised :mod:`.sign_features`; its scores are comparable across
@@ -21,6 +22,9 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ['RENDERED_ONLY_MIN_SCORE', 'SecondOpinion', 'fit_second_opinion']
+
+#: The label of end-of-limit signs (as :data:`.classifier.LABEL_END_OF_LIMIT`).
+END_OF_LIMIT_LABEL = 'end_of_limit'
 
 #: Least score of the model for a class it learned from renderings only, for the
 #: correlation's answer of that class to stand. Scores aim at +1 for the class and -1
@@ -90,6 +94,10 @@ class SecondOpinion:
         lead = float(scores[real[0]] - scores[real[1]]) if len(real) > 1 else np.inf
         allowed = [label for label in distinct[:candidates] if label in self.real_labels]
         if model_best not in allowed or lead < min_lead:
+            return None
+        if model_best == END_OF_LIMIT_LABEL and distinct[0].isdigit():
+            # an end of limit drops the limit in force: the model confirms one the
+            # correlation read, but does not turn a limit the correlation read into one
             return None
         return model_best
 
