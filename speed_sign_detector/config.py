@@ -147,8 +147,9 @@ class ClassifierConfig:
 
     psr_threshold: float = setting(8.0, 'Peak-to-sidelobe ratio below which the answer is '
                                    '"no sign".', low=0.0, high=1000.0)
-    min_margin: float = setting(0.25, 'PSR lead over the best other label below which a '
-                                'speed-limit answer is withheld ("no sign").',
+    min_margin: float = setting(0.25, 'PSR lead over the best other label below which an '
+                                'end-of-limit answer, and a speed-limit answer without a '
+                                'trained bank, is withheld ("no sign").',
                                 low=0.0, high=1000.0)
     kth_law: float = setting(0.5, 'Exponent k of the kth-law nonlinearity applied to '
                              'spectrum magnitudes (1 = linear).', low=0.0, high=1.0)
