@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import os
 import subprocess
-import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -17,9 +16,9 @@ import pytest
 import rclpy
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from ros_spin import spinning
 from scene_helpers import textured_background
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
@@ -67,17 +66,8 @@ def managed(request: pytest.FixtureRequest
         Parameter('diagnostics_period_s', value=0.5)])
     client = LifecycleClient(context=context)
     probe = Probe(context=context)
-    executor = SingleThreadedExecutor(context=context)
-    for member in (node, client, probe):
-        executor.add_node(member)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
-    spinner.start()
-    yield node, client, probe
-    executor.shutdown()
-    for member in (node, client, probe):
-        member.destroy_node()
-    rclpy.shutdown(context=context)
-    spinner.join(timeout=10)
+    with spinning(context, node, client, probe):
+        yield node, client, probe
 
 
 def send_frame(probe: Probe, seed: int) -> None:
@@ -145,22 +135,15 @@ def test_a_configure_that_cannot_build_the_pipeline_fails_with_the_reason(
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=DOMAIN_ID + 1)
     client = LifecycleClient(context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(client)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
-    spinner.start()
-    try:
-        assert client.state() == 'unconfigured'
-        assert not client.transition(Transition.TRANSITION_CONFIGURE)
-        assert client.state() == 'unconfigured'
-        assert process.poll() is None                  # the node keeps running
-    finally:
-        process.terminate()
-        status = process.wait(timeout=60)
-        executor.shutdown()
-        client.destroy_node()
-        rclpy.shutdown(context=context)
-        spinner.join(timeout=10)
+    with spinning(context, client):
+        try:
+            assert client.state() == 'unconfigured'
+            assert not client.transition(Transition.TRANSITION_CONFIGURE)
+            assert client.state() == 'unconfigured'
+            assert process.poll() is None                  # the node keeps running
+        finally:
+            process.terminate()
+            status = process.wait(timeout=60)
     output = log_path.read_text()
     assert status == 0, output
     assert 'configure failed' in output and 'OpenGL' in output, output

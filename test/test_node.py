@@ -23,7 +23,6 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import (
@@ -32,6 +31,7 @@ from rclpy.qos import (
     ReliabilityPolicy,
     qos_profile_sensor_data,
 )
+from ros_spin import spinning
 from scene_helpers import approach_frames, textured_background
 from sensor_msgs.msg import CompressedImage, Image, PointCloud2
 from std_msgs.msg import Header, UInt16
@@ -124,20 +124,11 @@ def ros(request: pytest.FixtureRequest) -> Iterator[tuple[SpeedSignDetectorNode,
         Parameter('classifier.cache_dir', value=str(bank_cache)),
         Parameter('overlap_stages', value=request.param)])
     probe = Probe(context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    executor.add_node(probe)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
-    spinner.start()
-    wait_for(lambda: probe.image_pub.get_subscription_count() > 0
-             and probe.compressed_pub.get_subscription_count() > 0
-             and node.count_subscribers('candidates') > 0, 'discovery')
-    yield node, probe
-    executor.shutdown()
-    node.destroy_node()
-    probe.destroy_node()
-    rclpy.shutdown(context=context)
-    spinner.join(timeout=10)
+    with spinning(context, node, probe):
+        wait_for(lambda: probe.image_pub.get_subscription_count() > 0
+                 and probe.compressed_pub.get_subscription_count() > 0
+                 and node.count_subscribers('candidates') > 0, 'discovery')
+        yield node, probe
 
 
 def send_and_wait(probe: Probe, msg: Any, publisher: Any) -> PointCloud2:

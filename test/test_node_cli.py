@@ -22,9 +22,9 @@ import rclpy
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, SetParameters
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
+from ros_spin import spinning
 from scene_helpers import approach_frames
 from sensor_msgs.msg import Image, PointCloud2
 from std_msgs.msg import Header
@@ -155,15 +155,8 @@ def peer() -> Iterator[Peer]:
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=DOMAIN_ID)
     node = Peer(context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
-    spinner.start()
-    yield node
-    executor.shutdown()
-    node.destroy_node()
-    rclpy.shutdown(context=context)
-    spinner.join(timeout=10)
+    with spinning(context, node):
+        yield node
 
 
 @pytest.fixture(scope='module')

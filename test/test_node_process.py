@@ -10,15 +10,14 @@ import shutil
 import signal
 import subprocess
 import sys
-import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import ReliabilityPolicy
+from ros_spin import spinning
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 from test_node import (
@@ -86,15 +85,8 @@ def probe() -> Iterator[Probe]:
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=DOMAIN_ID)
     probe = Probe(image_topic=CAMERA_TOPIC, context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(probe)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
-    spinner.start()
-    yield probe
-    executor.shutdown()
-    probe.destroy_node()
-    rclpy.shutdown(context=context)
-    spinner.join(timeout=10)
+    with spinning(context, probe):
+        yield probe
 
 
 def wait_until_serving(probe: Probe, process: subprocess.Popen) -> None:

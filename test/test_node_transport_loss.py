@@ -7,7 +7,6 @@ a warning naming the cause and the Fast DDS profile (read back from /rosout).
 from __future__ import annotations
 
 import os
-import threading
 import time
 from collections.abc import Callable, Iterator
 from typing import Any
@@ -17,8 +16,8 @@ import pytest
 import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus
 from rcl_interfaces.msg import Log
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
+from ros_spin import spinning
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 from test_node import Probe, wait_for
@@ -48,18 +47,9 @@ def ros(request: pytest.FixtureRequest) -> Iterator[tuple[SpeedSignDetectorNode,
     probe = Probe(context=context)
     logs: list[str] = []
     probe.create_subscription(Log, '/rosout', lambda msg: logs.append(msg.msg), 100)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    executor.add_node(probe)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
-    spinner.start()
-    wait_for(lambda: probe.image_pub.get_subscription_count() > 0, 'discovery')
-    yield node, probe, logs
-    executor.shutdown()
-    node.destroy_node()
-    probe.destroy_node()
-    rclpy.shutdown(context=context)
-    spinner.join(timeout=10)
+    with spinning(context, node, probe):
+        wait_for(lambda: probe.image_pub.get_subscription_count() > 0, 'discovery')
+        yield node, probe, logs
 
 
 def latest_status(probe: Probe, key_filter: Callable[[dict[str, Any]], bool]

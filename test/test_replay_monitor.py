@@ -10,7 +10,6 @@ from __future__ import annotations
 import json
 import os
 import subprocess
-import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -18,9 +17,9 @@ from pathlib import Path
 import pytest
 import rclpy
 from cli_helpers import tool
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
+from ros_spin import spinning
 from sensor_msgs.msg import CompressedImage, Image
 
 from speed_sign_detector.bag_io import BagReader
@@ -95,15 +94,8 @@ def listener() -> Iterator[tuple[list[Image], object]]:
     received: list[Image] = []
     node.create_subscription(Image, TOPIC, received.append,
                              QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    thread = threading.Thread(target=executor.spin, daemon=True)
-    thread.start()
-    yield received, node
-    executor.shutdown()
-    node.destroy_node()
-    rclpy.shutdown(context=context)
-    thread.join(timeout=5)
+    with spinning(context, node):
+        yield received, node
 
 
 @pytest.mark.parametrize('bag_format', ['mcap', 'ros1'])
