@@ -41,6 +41,9 @@ from speed_sign_detector.errors import BagError, SpeedSignError
 #: After a subscriber appears, how long the publisher waits for the subscriber's side of
 #: discovery before the first message, seconds.
 DISCOVERY_SETTLE_S = 0.5
+#: After the last message, how long the publisher stays for reliable subscribers to take
+#: it, seconds.
+FINAL_DELIVERY_S = 0.5
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -121,9 +124,7 @@ def _play(bag: BagReader, topic: str, msgtype: str, args: argparse.Namespace) ->
         elif args.wait > 0:
             # The publisher sees the subscriber before the subscriber has matched the
             # publisher; DDS drops what is sent in between (the first frames, even reliable).
-            end = time.monotonic() + DISCOVERY_SETTLE_S
-            while time.monotonic() < end:
-                rclpy.spin_once(node, timeout_sec=0.05)
+            _spin_for(node, DISCOVERY_SETTLE_S)
         total = 0
         passes = 0
         while True:
@@ -138,13 +139,19 @@ def _play(bag: BagReader, topic: str, msgtype: str, args: argparse.Namespace) ->
         if not args.quiet:
             print(f'\npublished {total} messages of {topic} on {publisher.topic_name} '
                   f'({passes} pass{"es" if passes > 1 else ""})', file=sys.stderr)
-        # Give reliable subscribers a moment to take the last messages.
-        end = time.monotonic() + 0.5
-        while time.monotonic() < end:
-            rclpy.spin_once(node, timeout_sec=0.05)
+        _spin_for(node, FINAL_DELIVERY_S)   # reliable subscribers take the last messages
         return 0
     finally:
         node.destroy_node()
+
+
+def _spin_for(node: Any, seconds: float) -> None:
+    """Serve ``node``'s events (discovery, acknowledgements) for ``seconds``."""
+    import rclpy
+
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        rclpy.spin_once(node, timeout_sec=0.05)
 
 
 def _play_once(bag: BagReader, topic: str, message_class: type, publisher: Any, node: Any,
