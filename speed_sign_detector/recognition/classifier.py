@@ -233,8 +233,7 @@ class Classifier:
                 unknown framing.
         """
         crop = _check_gray(crop, 'crop')
-        evidence = self.crop_evidence(crop, framing)
-        return evidence if isinstance(evidence, Classification) else self._decide(crop, evidence)
+        return self.decide(crop, self.crop_evidence(crop, framing))
 
     def crop_evidence(self, crop: np.ndarray, framing: str | None = None
                       ) -> CorrelationEvidence | Classification:
@@ -398,10 +397,7 @@ class Classifier:
 
     def _classify_at(self, gray: np.ndarray, x_px: float, y_px: float, radius_px: float
                      ) -> Classification:
-        evidence = self.evidence_at(gray, x_px, y_px, radius_px)
-        if isinstance(evidence, Classification):
-            return evidence
-        return self._decide(gray, evidence)
+        return self.decide(gray, self.evidence_at(gray, x_px, y_px, radius_px))
 
     def _decide(self, gray: np.ndarray, evidence: CorrelationEvidence,
                 use_second_opinion: bool = True) -> Classification:

@@ -54,12 +54,6 @@ class LabelledCrop:
         """The classifier's label for this crop's class (:data:`GTSRB_CLASS_NAMES`)."""
         return GTSRB_CLASS_NAMES[self.class_id]
 
-    @property
-    def sign_centre_radius(self) -> tuple[float, float, float]:
-        """(x, y, radius) of the sign from its box, crop pixels (pixel centres at +0.5)."""
-        x1, y1, x2, y2 = self.roi
-        return ((x1 + x2 + 1) / 2.0, (y1 + y2 + 1) / 2.0, (x2 - x1 + 1 + y2 - y1 + 1) / 4.0)
-
 
 def _track_of(filename: str) -> str:
     """``'00001/00012_00029.png'`` -> ``'00001/00012'`` (folder and track number)."""
@@ -116,11 +110,9 @@ def read_label_rows(folder: Path) -> list[LabelRow]:
     return parsed
 
 
-def read_crop_folder(folder: Path, classes: Sequence[int] | None = None
-                     ) -> list[LabelledCrop]:
+def read_crop_folder(folder: Path) -> list[LabelledCrop]:
     """The crops of ``folder/labels.csv`` of the classes the package has a label for
-    (:data:`GTSRB_CLASS_NAMES`; of ``classes`` only, when given). Rows of other classes
-    are skipped and logged.
+    (:data:`GTSRB_CLASS_NAMES`). Rows of other classes are skipped and logged.
 
     Raises:
         TrainingDataError: when the file is missing, empty or malformed.
@@ -128,8 +120,7 @@ def read_crop_folder(folder: Path, classes: Sequence[int] | None = None
     crops: list[LabelledCrop] = []
     skipped: Counter[int] = Counter()
     for row in read_label_rows(folder):
-        if row.class_id not in GTSRB_CLASS_NAMES or (classes is not None
-                                                     and row.class_id not in classes):
+        if row.class_id not in GTSRB_CLASS_NAMES:
             skipped[row.class_id] += 1
             continue
         crops.append(LabelledCrop(Path(folder) / row.filename, row.roi, row.class_id,
