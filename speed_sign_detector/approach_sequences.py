@@ -220,11 +220,6 @@ class ApproachSequence:
         return len(self.windows) + len(self.gap_windows)
 
 
-def sign_size_px(sign: SceneSign) -> float:
-    """Mean of the box's width and height, pixels."""
-    return 0.5 * ((sign.x2_px - sign.x1_px) + (sign.y2_px - sign.y1_px))
-
-
 def approach_windows(sign: SceneSign, scene_size: tuple[int, int], output_size: tuple[int, int],
                      frames: int, growth: float) -> tuple[CropWindow, ...]:
     """The windows of an approach on ``sign`` (see the module docstring).
@@ -345,7 +340,7 @@ def plan_sequences(scenes_dir: str | Path, config: ApproachConfig
     for name in files:
         signs = tuple(signs_by_file[name])
         limits = sorted((sign for sign in signs
-                         if sign.limit_kmh > 0 and sign_size_px(sign) >= config.min_sign_px),
+                         if sign.limit_kmh > 0 and 2.0 * sign.radius_px >= config.min_sign_px),
                         key=lambda sign: (sign.x1_px, sign.y1_px))
         if not limits:
             continue
@@ -475,4 +470,4 @@ def _clamp(value: float, low: float, high: float) -> float:
 
 __all__ = ['ApproachConfig', 'ApproachSceneError', 'ApproachSequence', 'ApproachStream',
            'CropWindow', 'GTSDB_CLASS_KINDS', 'approach_windows', 'gap_windows',
-           'plan_sequences', 'sign_size_px']
+           'plan_sequences']

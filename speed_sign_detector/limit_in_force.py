@@ -35,9 +35,6 @@ from dataclasses import dataclass
 
 from speed_sign_detector.truth import TruthTrack
 
-#: Truth kinds of end-of-limit signs start with this (they set "no limit", 0).
-END_OF_LIMIT_KIND_PREFIX = 'end_of_limit'
-
 
 @dataclass(frozen=True)
 class LimitSignPassing:
@@ -81,7 +78,7 @@ def limit_sign_passings(tracks: Sequence[TruthTrack]) -> tuple[LimitSignPassing,
     passings = [LimitSignPassing(track.first_stamp_s, track.last_stamp_s, track.limit_kmh,
                                  track.track_id, track.rows[-1].radius_px)
                 for track in tracks
-                if track.limit_kmh > 0 or track.kind.startswith(END_OF_LIMIT_KIND_PREFIX)]
+                if track.is_limit or track.is_end_of_limit]
     passings.sort(key=lambda passing: (passing.passed_stamp_s, passing.last_radius_px,
                                        passing.track_id))
     return tuple(passings)

@@ -44,6 +44,8 @@ from speed_sign_detector.errors import TruthFileError
 #: Column names of a truth file, in the order they are written.
 TRUTH_COLUMNS: tuple[str, ...] = ('stamp_s', 'frame', 'track_id', 'kind', 'limit_kmh',
                                   'x1', 'y1', 'x2', 'y2')
+#: How the ``kind`` of every end-of-limit sign begins (``end_of_limit_50``, ...).
+END_OF_LIMIT_KIND_PREFIX = 'end_of_limit'
 
 
 @dataclass(frozen=True)
@@ -103,6 +105,11 @@ class TruthTrack:
     def is_limit(self) -> bool:
         """True for a speed-limit sign."""
         return self.limit_kmh > 0
+
+    @property
+    def is_end_of_limit(self) -> bool:
+        """True for an end-of-limit sign."""
+        return self.kind.startswith(END_OF_LIMIT_KIND_PREFIX)
 
     @property
     def max_radius_px(self) -> float:

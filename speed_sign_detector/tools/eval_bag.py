@@ -102,13 +102,16 @@ from speed_sign_detector.tools.run_control import (
     StopRequest,
     stop_on_interrupt,
 )
-from speed_sign_detector.truth import TruthTrack, group_tracks, read_truth
+from speed_sign_detector.truth import (
+    END_OF_LIMIT_KIND_PREFIX,
+    TruthTrack,
+    group_tracks,
+    read_truth,
+)
 
 if TYPE_CHECKING:
     from speed_sign_detector.pipeline import FrameResult, Pipeline
 
-#: Truth kinds of end-of-limit signs start with this.
-END_OF_LIMIT_PREFIX = 'end_of_limit'
 #: Default grace after a sign left the image within which recognizing it still counts, s.
 DEFAULT_GRACE_S = 1.0
 #: File endings a contact sheet may have.
@@ -287,7 +290,7 @@ def score_drive(tracks: Sequence[TruthTrack], events: Sequence[LimitEvent],
                    if track.first_stamp_s - tolerance_s <= event.stamp_s
                    <= track.last_stamp_s + grace_s]
         if event.limit_kmh == 0:
-            ends = [track for track in in_view if _is_end_of_limit(track)]
+            ends = [track for track in in_view if track.is_end_of_limit]
             if ends:
                 best = min(ends, key=lambda track: _distance_px(track, event))
                 outcomes[best.track_id].recognized = True
@@ -322,12 +325,12 @@ def score_drive(tracks: Sequence[TruthTrack], events: Sequence[LimitEvent],
     if stopped_early:
         for track in seen:
             outcome = outcomes[track.track_id]
-            outcome.cut = (not outcome.recognized and (track.is_limit or _is_end_of_limit(track))
+            outcome.cut = (not outcome.recognized and (track.is_limit or track.is_end_of_limit)
                            and track.last_stamp_s + grace_s > last_stamp + tolerance_s)
     limit_outcomes = [outcome for outcome in outcomes.values()
                       if outcome.limit_kmh > 0 and not outcome.cut]
     end_outcomes = [outcome for outcome in outcomes.values()
-                    if outcome.kind.startswith(END_OF_LIMIT_PREFIX) and not outcome.cut]
+                    if outcome.kind.startswith(END_OF_LIMIT_KIND_PREFIX) and not outcome.cut]
     recognized = sum(outcome.recognized for outcome in limit_outcomes)
     wrong = lookalike + misread + phantom
     drive_time_s = last_stamp - first_stamp + period_s if stamps.size else 0.0
@@ -342,10 +345,6 @@ def score_drive(tracks: Sequence[TruthTrack], events: Sequence[LimitEvent],
         outcomes=tuple(sorted(outcomes.values(), key=lambda outcome: outcome.first_s)),
         drive_time_s=drive_time_s,
         cut_signs=sum(outcome.cut and outcome.limit_kmh > 0 for outcome in outcomes.values()))
-
-
-def _is_end_of_limit(track: TruthTrack) -> bool:
-    return track.kind.startswith(END_OF_LIMIT_PREFIX)
 
 
 def _nearest_row(track: TruthTrack, stamp_s: float) -> Any:
@@ -590,7 +589,7 @@ def format_report(summary: dict[str, Any]) -> str:
                 result = 'cut'
             elif row['limit_kmh'] > 0:
                 result = 'recognized' if row['recognized'] else 'MISSED'
-            elif row['kind'].startswith(END_OF_LIMIT_PREFIX):
+            elif row['kind'].startswith(END_OF_LIMIT_KIND_PREFIX):
                 result = 'end read' if row['recognized'] else 'end missed'
             else:
                 result = 'look-alike'

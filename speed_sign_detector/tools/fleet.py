@@ -60,6 +60,7 @@ from speed_sign_detector.tools.fleet_report import (
     write_summary_png,
 )
 from speed_sign_detector.tools.progress import progress_bar
+from speed_sign_detector.tools.run_control import EXIT_INTERRUPTED
 
 if TYPE_CHECKING:
     from speed_sign_detector.tools.fleet_worker import WorkerProgress
@@ -392,5 +393,5 @@ def run(args: argparse.Namespace) -> int:
     report = run_fleet(jobs, settings, FleetFolder(args.out), options)
     print(report.to_json() if args.json else format_table(report))
     if report.interrupted:
-        return 130
+        return EXIT_INTERRUPTED
     return 0 if report.all_done else 1
