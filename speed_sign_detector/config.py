@@ -146,7 +146,16 @@ class ClassifierConfig:
     """FFT template classifier (DAGM 2010)."""
 
     psr_threshold: float = setting(8.0, 'Peak-to-sidelobe ratio below which the answer is '
-                                   '"no sign".', low=0.0, high=1000.0)
+                                   '"no sign" (with a trained second opinion: below which '
+                                   'the answer needs its clearer lead).', low=0.0,
+                                   high=1000.0)
+    second_opinion_psr_threshold: float = setting(
+        7.0, 'With a trained second opinion, the PSR below which the answer is "no sign" '
+        '(instead of psr_threshold); below psr_threshold the second opinion must then lead by '
+        'second_opinion_low_psr_lead.', low=0.0, high=1000.0)
+    second_opinion_low_psr_lead: float = setting(
+        0.5, 'Least score lead of the second opinion for an answer whose PSR is below '
+        'psr_threshold (it needs the bank\'s own min_lead above it).', low=0.0, high=10.0)
     min_margin: float = setting(0.25, 'PSR lead over the best other label below which an '
                                 'end-of-limit answer, and a speed-limit answer without a '
                                 'trained bank, is withheld ("no sign").',

@@ -23,6 +23,7 @@ from speed_sign_detector.recognition.bank_file import load_bank_file, save_bank_
 from speed_sign_detector.recognition.classifier import (
     LABEL_END_OF_LIMIT,
     Classifier,
+    CorrelationEvidence,
     crop_sign_radius,
 )
 from speed_sign_detector.recognition.filter_banks import bank_radii, build_banks
@@ -32,6 +33,7 @@ from speed_sign_detector.recognition.second_opinion import (
     RENDERED_ONLY_MIN_SCORE,
     SecondOpinion,
 )
+from speed_sign_detector.recognition.sign_features import FEATURE_SIZE
 from speed_sign_detector.recognition.templates import LIMIT_VALUES_KMH, render_sign
 from speed_sign_detector.recognition.trained_bank import (
     TRAINED_BANK_FORMAT,
@@ -311,3 +313,37 @@ def test_second_opinion_never_turns_a_limit_into_an_end_of_limit() -> None:
     assert opinion.choose(reads_end, [END_OF_LIMIT_LABEL, '20'], 2, 0.2) == END_OF_LIMIT_LABEL
     assert opinion.choose(reads_end, ['other_sign', END_OF_LIMIT_LABEL], 2,
                           0.2) == END_OF_LIMIT_LABEL
+
+
+def test_weak_correlation_peaks_need_a_clear_second_opinion() -> None:
+    """Between second_opinion_psr_threshold and psr_threshold an answer needs the second
+    opinion's larger lead; below the lower threshold, and without a second opinion below
+    psr_threshold, the answer is withheld."""
+    config = dataclasses.replace(SMALL, psr_threshold=8.0, second_opinion_psr_threshold=7.0,
+                                 second_opinion_low_psr_lead=0.5)
+    labels = ('30', '80', 'other_sign')
+    size = len(labels)
+
+    def classifier_reading(scores: list[float]) -> Classifier:
+        # zero weights: the model scores every sign with its bias
+        opinion = SecondOpinion(labels, np.zeros(FEATURE_SIZE, np.float32),
+                                np.ones(FEATURE_SIZE, np.float32),
+                                np.zeros((FEATURE_SIZE, size), np.float32),
+                                np.asarray(scores, np.float32), labels)
+        return Classifier(config, TrainedBank(opinion, candidates=2, min_lead=0.2))
+
+    gray = crop_of('30', 40, 6, seed=5)
+
+    def answer(classifier: Classifier, psr: float, use_second_opinion: bool = True) -> str:
+        evidence = CorrelationEvidence((('30', psr), ('80', psr - 1.0)), 26.0, 26.0, 20.0,
+                                       0.0, 10.0)
+        return classifier.decide(gray, evidence, use_second_opinion).label
+
+    leads_by_0_3 = classifier_reading([0.3, 0.0, -1.0])
+    leads_by_0_6 = classifier_reading([0.6, 0.0, -1.0])
+    assert answer(leads_by_0_3, 9.0) == '30'        # a clear peak: the bank's min_lead
+    assert answer(leads_by_0_3, 7.5) == 'no_sign'   # a weak peak: 0.3 is not enough
+    assert answer(leads_by_0_6, 7.5) == '30'
+    assert answer(leads_by_0_6, 6.5) == 'no_sign'   # below second_opinion_psr_threshold
+    assert answer(leads_by_0_6, 7.5, use_second_opinion=False) == 'no_sign'
+    assert answer(leads_by_0_6, 9.0, use_second_opinion=False) == '30'

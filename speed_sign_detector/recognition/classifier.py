@@ -15,7 +15,9 @@ Method (DAGM 2010, section 4), per candidate:
    the ring and the surroundings are common to all classes and otherwise dominate the
    correlation (measured on real crops: 0.55 -> 0.9 accuracy).
 3. Below ``psr_threshold``, or for a limit ahead of another label by less than
-   ``min_margin``, the answer is "no sign" (a wrong limit is worse than none).
+   ``min_margin``, the answer is "no sign" (a wrong limit is worse than none). With a
+   trained bank its second opinion decides among the leading classes (or withholds);
+   it may then answer down to ``second_opinion_psr_threshold`` when it leads clearly.
 
 Every filter is a kth-law MACE composite (optimal trade-off with noise) of the
 out-of-plane views of one template (yaw 0, +-10, +-20, +-30 deg x pitch 0, +-10 deg);
@@ -413,14 +415,18 @@ class Classifier:
         height, width = gray.shape
         cut_px = max(-frame_x, -frame_y, frame_x - (width - 1),
                      frame_y - (height - 1)) + size_radius
-        withhold = (evidence.ranked[0][1] < config.psr_threshold
-                    or cut_px > config.max_cut_fraction * size_radius)
         opinion = self.trained_bank.second_opinion if use_second_opinion else None
+        top_psr = evidence.ranked[0][1]
+        withhold = (top_psr < (config.psr_threshold if opinion is None
+                               else config.second_opinion_psr_threshold)
+                    or cut_px > config.max_cut_fraction * size_radius)
         if opinion is not None and not withhold:
             scores = opinion.scores(sign_features(aligned_patches(
                 gray, np.asarray([[frame_x, frame_y, size_radius]]))))[0]
-            choice = opinion.choose(scores, labels, self.trained_bank.candidates,
-                                    self.trained_bank.min_lead)
+            # a weak correlation peak needs a clearer second opinion
+            min_lead = self.trained_bank.min_lead if top_psr >= config.psr_threshold else \
+                max(self.trained_bank.min_lead, config.second_opinion_low_psr_lead)
+            choice = opinion.choose(scores, labels, self.trained_bank.candidates, min_lead)
             withhold = choice is None
             label = choice if choice is not None else label
         psr = next(p for (_, p), name in zip(evidence.ranked, labels) if name == label)
