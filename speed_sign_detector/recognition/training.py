@@ -40,6 +40,7 @@ from speed_sign_detector import __version__
 from speed_sign_detector.config import ClassifierConfig
 from speed_sign_detector.errors import TrainingDataError
 from speed_sign_detector.recognition.classifier import (
+    Classification,
     Classifier,
     CorrelationEvidence,
 )
@@ -102,17 +103,22 @@ class LocatedCrops:
         crops: the labelled crops.
         signs: (N, 3) float64 (x, y, radius) in crop pixels; NaN where none was found.
         images: the (h, w) uint8 gray crops.
+        evidence: what the rendered-only classifier measured in each crop
+            (:meth:`Classifier.crop_evidence`), so that answers from the same filters need
+            no second correlation.
     """
 
     crops: tuple[LabelledCrop, ...]
     signs: np.ndarray
     images: tuple[np.ndarray, ...]
+    evidence: tuple[CorrelationEvidence | Classification, ...]
 
     def subset(self, mask: np.ndarray) -> LocatedCrops:
         """The crops where ``mask`` (N,) is true."""
         indices = np.flatnonzero(mask)
         return LocatedCrops(tuple(self.crops[i] for i in indices), self.signs[indices],
-                            tuple(self.images[i] for i in indices))
+                            tuple(self.images[i] for i in indices),
+                            tuple(self.evidence[i] for i in indices))
 
 
 def _read_gray(crop: LabelledCrop) -> np.ndarray:
@@ -153,13 +159,15 @@ def locate_signs(classifier: Classifier, crops: Sequence[LabelledCrop],
                  ) -> LocatedCrops:
     """Where ``classifier`` finds the sign in each crop (:meth:`Classifier.crop_evidence`)."""
     signs = np.full((len(crops), 3), np.nan)
+    found: list[CorrelationEvidence | Classification] = []
     for index, image in enumerate(images):
         evidence = classifier.crop_evidence(image)
         if isinstance(evidence, CorrelationEvidence):
             signs[index] = (evidence.x_px, evidence.y_px, evidence.radius_px)
+        found.append(evidence)
         if progress is not None:
             progress(index + 1, len(images))
-    return LocatedCrops(tuple(crops), signs, tuple(images))
+    return LocatedCrops(tuple(crops), signs, tuple(images), tuple(found))
 
 
 def _degraded(image: np.ndarray, rng: np.random.Generator) -> np.ndarray:
@@ -420,13 +428,16 @@ def cross_validate(folders: Sequence[Path], folds: int = 5,
     rendered_crops = locate_rendered(rendered, config)
     answers: dict[str, list[str]] = {variant: [''] * len(crops) for variant in VARIANTS}
     for index, image in enumerate(images):
-        answers['rendered'][index] = rendered.classify_crop(image).label
+        answers['rendered'][index] = rendered.decide(image, located.evidence[index]).label
     for fold in range(folds):
         train = fold_of != fold
         bank = train_from_located(located.subset(train), config, rendered=rendered_crops)
         trained = Classifier(classifier_config, bank)
         for index in np.flatnonzero(~train):
-            evidence = trained.crop_evidence(images[index])
+            # without real examples in its composite filters the trained classifier
+            # correlates with the rendered filters: their evidence stands
+            evidence = located.evidence[index] if not bank.class_examples else \
+                trained.crop_evidence(images[index])
             answers['trained_filters'][index] = trained.decide(
                 images[index], evidence, use_second_opinion=False).label
             answers['trained_filters_second_opinion'][index] = trained.decide(
