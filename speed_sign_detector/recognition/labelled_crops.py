@@ -20,17 +20,29 @@ import numpy as np
 
 from speed_sign_detector.errors import TrainingDataError
 
-__all__ = ['GTSRB_CLASS_NAMES', 'LABELS_HEADER', 'LabelRow', 'LabelledCrop', 'read_crop_folder',
+__all__ = ['GTSRB_CLASS_NAMES', 'GTSRB_END_OF_80', 'GTSRB_LIMITS_KMH', 'GTSRB_LOOKALIKE_NAMES',
+           'LABELS_HEADER', 'LabelRow', 'LabelledCrop', 'read_crop_folder',
            'read_label_rows', 'track_folds']
 
 _LOG = logging.getLogger(__name__)
 
+#: GTSRB class id -> speed limit in km/h (class 6, end of 80, has none).
+GTSRB_LIMITS_KMH: dict[int, int] = {0: 20, 1: 30, 2: 50, 3: 60, 4: 70, 5: 80, 7: 100, 8: 120}
+#: GTSRB class id of the end-of-80 sign.
+GTSRB_END_OF_80 = 6
+#: GTSRB class id -> name of the round signs that are NOT speed limits (look-alikes).
+GTSRB_LOOKALIKE_NAMES: dict[int, str] = {
+    9: 'no_passing', 10: 'no_passing_over_3.5t', 15: 'no_vehicles',
+    16: 'no_vehicles_over_3.5t', 17: 'no_entry', 32: 'end_of_all_limits',
+    33: 'turn_right_ahead', 34: 'turn_left_ahead', 35: 'ahead_only', 36: 'ahead_or_right',
+    37: 'ahead_or_left', 38: 'keep_right', 39: 'keep_left', 40: 'roundabout',
+    41: 'end_of_no_passing', 42: 'end_of_no_passing_over_3.5t'}
 #: GTSRB class id -> the classifier's label for it: the limit in km/h as a string,
 #: ``'end_of_limit'``, or ``'other_sign'`` for the round look-alikes (negatives).
 GTSRB_CLASS_NAMES: dict[int, str] = {
-    0: '20', 1: '30', 2: '50', 3: '60', 4: '70', 5: '80', 6: 'end_of_limit', 7: '100',
-    8: '120', **{class_id: 'other_sign' for class_id in (9, 10, 15, 16, 17, 32, 33, 34, 35,
-                                                         36, 37, 38, 39, 40, 41, 42)}}
+    **{class_id: str(limit) for class_id, limit in GTSRB_LIMITS_KMH.items()},
+    GTSRB_END_OF_80: 'end_of_limit',
+    **{class_id: 'other_sign' for class_id in GTSRB_LOOKALIKE_NAMES}}
 
 
 @dataclass(frozen=True)

@@ -46,7 +46,10 @@ import numpy as np
 from speed_sign_detector.config import ClassifierConfig, load_yaml
 from speed_sign_detector.errors import TrainingDataError, TruthFileError
 from speed_sign_detector.recognition.classifier import Classification, Classifier
-from speed_sign_detector.recognition.labelled_crops import (
+from speed_sign_detector.recognition.labelled_crops import (  # noqa: F401 (re-exported)
+    GTSRB_END_OF_80,
+    GTSRB_LIMITS_KMH,
+    GTSRB_LOOKALIKE_NAMES,
     LABELS_HEADER,
     read_label_rows,
 )
@@ -64,16 +67,6 @@ from speed_sign_detector.tools.run_control import (
 
 _LOG = logging.getLogger(__name__)
 
-#: GTSRB class id -> speed limit in km/h (class 6, end of 80, has none).
-GTSRB_LIMITS_KMH: dict[int, int] = {0: 20, 1: 30, 2: 50, 3: 60, 4: 70, 5: 80, 7: 100, 8: 120}
-GTSRB_END_OF_80 = 6
-#: GTSRB class id -> name of the round signs that are NOT speed limits (look-alikes).
-GTSRB_LOOKALIKE_NAMES: dict[int, str] = {
-    9: 'no_passing', 10: 'no_passing_over_3.5t', 15: 'no_vehicles',
-    16: 'no_vehicles_over_3.5t', 17: 'no_entry', 32: 'end_of_all_limits',
-    33: 'turn_right_ahead', 34: 'turn_left_ahead', 35: 'ahead_only', 36: 'ahead_or_right',
-    37: 'ahead_or_left', 38: 'keep_right', 39: 'keep_left', 40: 'roundabout',
-    41: 'end_of_no_passing', 42: 'end_of_no_passing_over_3.5t'}
 #: Upper bounds (exclusive) of the sign-size bins, pixels of the ROI width.
 SIZE_BINS_PX: tuple[int, ...] = (20, 25, 30, 40, 50, 70, 10_000)
 
