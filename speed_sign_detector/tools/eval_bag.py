@@ -713,10 +713,11 @@ def run(args: argparse.Namespace) -> int:
 
 def summary_json(summary: Mapping[str, Any]) -> str:
     """A summary as one line of JSON, as ``speed_sign_eval bag --json`` prints it."""
-    return json.dumps(summary, default=_json_default)
+    return json.dumps(summary, default=numpy_json_default)
 
 
-def _json_default(value: Any) -> Any:
-    if isinstance(value, (np.floating, np.integer)):
+def numpy_json_default(value: Any) -> Any:
+    """``json.dumps`` ``default``: numpy scalars as Python values."""
+    if isinstance(value, np.generic):
         return value.item()
     raise TypeError(f'{type(value).__name__} is not JSON serializable')

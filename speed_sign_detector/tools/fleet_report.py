@@ -41,7 +41,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from speed_sign_detector.tools.eval_bag import sum_drive_metrics, summary_json
+from speed_sign_detector.tools.eval_bag import (
+    numpy_json_default,
+    sum_drive_metrics,
+    summary_json,
+)
 from speed_sign_detector.tools.fleet_jobs import BagOutcome, FleetError
 
 #: Longest bag name shown in the table, characters.
@@ -227,7 +231,7 @@ def write_report_json(report: FleetReport, path: Path, scratch: Path) -> None:
     temporary = scratch / path.name
     try:
         temporary.write_text(json.dumps(report.to_json_dict(), indent=1,
-                                        default=_json_default) + '\n', encoding='utf-8')
+                                        default=numpy_json_default) + '\n', encoding='utf-8')
         os.replace(temporary, path)
     except OSError as err:
         raise FleetError(f'cannot write {path}: {err}') from err
@@ -315,7 +319,3 @@ def _short_name(bag: str, limit: int = TABLE_NAME_CHARS) -> str:
     return name if len(name) <= limit else name[:limit - 1] + '~'
 
 
-def _json_default(value: Any) -> Any:
-    if hasattr(value, 'item'):
-        return value.item()
-    raise TypeError(f'{type(value).__name__} is not JSON serializable')

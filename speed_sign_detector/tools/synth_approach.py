@@ -136,7 +136,8 @@ def main(argv: list[str] | None = None) -> int:
             f' ({written} frames were written to {args.out_bag})' if written else ''),
             file=sys.stderr)
         return 1
-    print(f'wrote {written} frames ({len(stream.sequences)} approach sequences of '
+    count = len(stream.sequences)
+    print(f'wrote {written} frames ({count} approach sequence{"" if count == 1 else "s"} of '
           f'{config.frames_per_sequence} frames + {config.gap_frames} gap frames at '
           f'{config.fps:g} fps) from {args.scenes_dir} to {args.out_bag}'
           + (f'; truth in {args.truth}' if args.truth else ''), file=sys.stderr)
