@@ -8,6 +8,7 @@ scene with a filter is the filter's match with its top-left corner at scene pixe
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -101,34 +102,63 @@ def peak_psr(planes: np.ndarray, centre_yx: tuple[int, int], search_half: int,
     count, ny, nx = planes.shape
     if exclude_half >= sidelobe_half:
         raise ValueError('exclude_half must be smaller than sidelobe_half')
-    cy, cx = centre_yx
-    offsets = np.arange(-search_half, search_half + 1)
-    rows = (cy + offsets) % ny
-    cols = (cx + offsets) % nx
-    window = planes[:, rows[:, None], cols[None, :]].reshape(count, -1)
+    cy, cx = int(centre_yx[0]), int(centre_yx[1])
+    # every sidelobe square lies in one block, centre +/- (search_half + sidelobe_half):
+    # copy that block once (by cached flat indices), then read each plane's square from
+    # a strided view of it, with no index arithmetic per call
+    reach = search_half + sidelobe_half
+    block_side = 2 * reach + 1
+    block = planes.reshape(count, -1).take(_square_indices((cy, cx), reach, (ny, nx)),
+                                           axis=1).reshape(count, block_side, block_side)
+    search_side = 2 * search_half + 1
+    window = block[:, sidelobe_half:sidelobe_half + search_side,
+                   sidelobe_half:sidelobe_half + search_side].reshape(count, -1)
     best = np.argmax(window, axis=1)
-    side = offsets.size
-    peak_y = rows[best // side]
-    peak_x = cols[best % side]
-    peak_value = window[np.arange(count), best]
-
-    lobe = np.arange(-sidelobe_half, sidelobe_half + 1)
-    lobe_rows = (peak_y[:, None] + lobe[None, :]) % ny  # (F, L)
-    lobe_cols = (peak_x[:, None] + lobe[None, :]) % nx
-    region = planes[np.arange(count)[:, None, None], lobe_rows[:, :, None],
-                    lobe_cols[:, None, :]]  # (F, L, L)
-    keep = np.ones((lobe.size, lobe.size), dtype=bool)
-    inner = slice(sidelobe_half - exclude_half, sidelobe_half + exclude_half + 1)
-    keep[inner, inner] = False
+    peak_value = window.max(axis=1)
+    best_y, best_x = np.divmod(best, search_side)
+    # each plane's sidelobe square, read from a strided view of the block's squares
+    lobe_side = 2 * sidelobe_half + 1
+    squares = np.lib.stride_tricks.as_strided(
+        block, (count, search_side, search_side, lobe_side, lobe_side),
+        block.strides + block.strides[1:], writeable=False)
+    region = squares[np.arange(count), best_y, best_x].reshape(count, -1).astype(np.float64)
     # mean and standard deviation from the sums in one pass, in float64 (numpy's std
-    # takes two; the PSR agrees to float32 rounding)
-    sidelobes = region[:, keep].astype(np.float64)
-    count_kept = sidelobes.shape[1]
-    mean = sidelobes.sum(axis=1) / count_kept
-    variance = np.einsum('ij,ij->i', sidelobes, sidelobes) / count_kept - mean * mean
+    # takes two; the PSR agrees to float32 rounding); the weights drop the centre
+    weights = _sidelobe_weights(sidelobe_half, exclude_half)
+    count_kept = weights.sum()
+    mean = region @ weights / count_kept
+    np.square(region, out=region)
+    variance = region @ weights / count_kept - mean * mean
     std = np.sqrt(np.maximum(variance, 0.0))
     psr = (peak_value - mean) / np.maximum(std, np.float32(1e-12))
+    peak_y = (cy - search_half + best_y) % ny
+    peak_x = (cx - search_half + best_x) % nx
     return PeakStats(peak_value, peak_y, peak_x, psr.astype(np.float32))
+
+
+@functools.lru_cache(maxsize=1024)
+def _square_indices(centre_yx: tuple[int, int], reach: int, shape: tuple[int, int]
+                    ) -> np.ndarray:
+    """Flat indices into an (Ny, Nx) array of the square ``centre +/- reach`` (circular),
+    row by row: ((2 * reach + 1) ** 2,), read-only, cached."""
+    span = np.arange(-reach, reach + 1)
+    rows = (centre_yx[0] + span) % shape[0]
+    cols = (centre_yx[1] + span) % shape[1]
+    indices = (rows[:, None] * shape[1] + cols[None, :]).reshape(-1)
+    indices.flags.writeable = False
+    return indices
+
+
+@functools.lru_cache(maxsize=256)
+def _sidelobe_weights(sidelobe_half: int, exclude_half: int) -> np.ndarray:
+    """((2 * sidelobe_half + 1) ** 2,) float64 weights of a sidelobe square, row by row:
+    1, and 0 inside the central (2 * exclude_half + 1) ** 2 square; read-only, cached."""
+    weights = np.ones((2 * sidelobe_half + 1, 2 * sidelobe_half + 1))
+    inner = slice(sidelobe_half - exclude_half, sidelobe_half + exclude_half + 1)
+    weights[inner, inner] = 0.0
+    weights = weights.reshape(-1)
+    weights.flags.writeable = False
+    return weights
 
 
 def disc_window(shape: tuple[int, int], centre_yx: tuple[float, float],
