@@ -115,63 +115,76 @@ def peak_psr(planes: np.ndarray, centre_yx: tuple[int, int], search_half: int,
     count, ny, nx = planes.shape
     if exclude_half >= sidelobe_half:
         raise ValueError('exclude_half must be smaller than sidelobe_half')
-    cy, cx = int(centre_yx[0]), int(centre_yx[1])
+    layout = _psr_layout((int(centre_yx[0]), int(centre_yx[1])), (ny, nx), search_half,
+                         sidelobe_half, exclude_half)
     # every sidelobe square lies in one block, centre +/- (search_half + sidelobe_half):
-    # copy that block once (by cached flat indices), then read each plane's square from
-    # a strided view of it, with no index arithmetic per call
-    reach = search_half + sidelobe_half
-    block_side = 2 * reach + 1
-    block = planes.reshape(count, -1).take(_square_indices((cy, cx), reach, (ny, nx)),
-                                           axis=1).reshape(count, block_side, block_side)
+    # copy that block once, then read each plane's square from a strided view of it
+    block_side = layout.block_side
+    block = planes.reshape(count, -1).take(layout.block_indices, axis=1).reshape(
+        count, block_side, block_side)
     search_side = 2 * search_half + 1
     window = block[:, sidelobe_half:sidelobe_half + search_side,
                    sidelobe_half:sidelobe_half + search_side].reshape(count, -1)
-    best = np.argmax(window, axis=1)
+    best = window.argmax(axis=1)
     peak_value = window.max(axis=1)
     best_y, best_x = np.divmod(best, search_side)
-    # each plane's sidelobe square, read from a strided view of the block's squares
     lobe_side = 2 * sidelobe_half + 1
-    squares = np.lib.stride_tricks.as_strided(
-        block, (count, search_side, search_side, lobe_side, lobe_side),
-        block.strides + block.strides[1:], writeable=False)
+    squares = np.ndarray((count, search_side, search_side, lobe_side, lobe_side), block.dtype,
+                         block, 0, block.strides + block.strides[1:])
     region = squares[np.arange(count), best_y, best_x].reshape(count, -1).astype(np.float64)
     # mean and standard deviation from the sums in one pass, in float64 (numpy's std
     # takes two; the PSR agrees to float32 rounding); the weights drop the centre
-    weights = _sidelobe_weights(sidelobe_half, exclude_half)
-    count_kept = weights.sum()
-    mean = region @ weights / count_kept
+    mean = region @ layout.sidelobe_weights / layout.sidelobe_count
     np.square(region, out=region)
-    variance = region @ weights / count_kept - mean * mean
+    variance = region @ layout.sidelobe_weights / layout.sidelobe_count - mean * mean
     std = np.sqrt(np.maximum(variance, 0.0))
     psr = (peak_value - mean) / np.maximum(std, np.float32(1e-12))
-    peak_y = (cy - search_half + best_y) % ny
-    peak_x = (cx - search_half + best_x) % nx
-    return PeakStats(peak_value, peak_y, peak_x, psr.astype(np.float32))
+    return PeakStats(peak_value, layout.search_rows[best_y], layout.search_cols[best_x],
+                     psr.astype(np.float32))
+
+
+@dataclass(frozen=True)
+class _PsrLayout:
+    """Index arrays and weights of :func:`peak_psr` for one plane shape, centre and set of
+    half sizes (read-only, cached by :func:`_psr_layout`).
+
+    Attributes:
+        block_side: side of the block that holds every sidelobe square,
+            ``2 * (search_half + sidelobe_half) + 1``.
+        block_indices: (block_side ** 2,) flat plane indices of the block, row by row
+            (circular).
+        search_rows, search_cols: (2 * search_half + 1,) plane rows / columns of the peak
+            search square.
+        sidelobe_weights: ((2 * sidelobe_half + 1) ** 2,) float64, row by row: 1, and 0
+            in the excluded central square.
+        sidelobe_count: number of sidelobe pixels (the weights' sum).
+    """
+
+    block_side: int
+    block_indices: np.ndarray
+    search_rows: np.ndarray
+    search_cols: np.ndarray
+    sidelobe_weights: np.ndarray
+    sidelobe_count: float
 
 
 @functools.lru_cache(maxsize=1024)
-def _square_indices(centre_yx: tuple[int, int], reach: int, shape: tuple[int, int]
-                    ) -> np.ndarray:
-    """Flat indices into an (Ny, Nx) array of the square ``centre +/- reach`` (circular),
-    row by row: ((2 * reach + 1) ** 2,), read-only, cached."""
-    span = np.arange(-reach, reach + 1)
-    rows = (centre_yx[0] + span) % shape[0]
-    cols = (centre_yx[1] + span) % shape[1]
-    indices = (rows[:, None] * shape[1] + cols[None, :]).reshape(-1)
-    indices.flags.writeable = False
-    return indices
-
-
-@functools.lru_cache(maxsize=256)
-def _sidelobe_weights(sidelobe_half: int, exclude_half: int) -> np.ndarray:
-    """((2 * sidelobe_half + 1) ** 2,) float64 weights of a sidelobe square, row by row:
-    1, and 0 inside the central (2 * exclude_half + 1) ** 2 square; read-only, cached."""
+def _psr_layout(centre_yx: tuple[int, int], shape: tuple[int, int], search_half: int,
+                sidelobe_half: int, exclude_half: int) -> _PsrLayout:
+    reach = search_half + sidelobe_half
+    rows = (centre_yx[0] + np.arange(-reach, reach + 1)) % shape[0]
+    cols = (centre_yx[1] + np.arange(-reach, reach + 1)) % shape[1]
     weights = np.ones((2 * sidelobe_half + 1, 2 * sidelobe_half + 1))
     inner = slice(sidelobe_half - exclude_half, sidelobe_half + exclude_half + 1)
     weights[inner, inner] = 0.0
-    weights = weights.reshape(-1)
-    weights.flags.writeable = False
-    return weights
+    search = slice(sidelobe_half, sidelobe_half + 2 * search_half + 1)
+    layout = _PsrLayout(2 * reach + 1, (rows[:, None] * shape[1] + cols[None, :]).reshape(-1),
+                        rows[search], cols[search], weights.reshape(-1),
+                        float(weights.sum()))
+    for array in (layout.block_indices, layout.search_rows, layout.search_cols,
+                  layout.sidelobe_weights):
+        array.flags.writeable = False
+    return layout
 
 
 def disc_window(shape: tuple[int, int], centre_yx: tuple[float, float],
