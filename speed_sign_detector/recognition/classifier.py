@@ -177,6 +177,15 @@ class Classifier:
         self.banks: tuple[SizeBank, ...] = build_banks(config, trained_bank.class_examples)
         self.build_time_s = time.perf_counter() - start
         self._radii = np.asarray([bank.radius_px for bank in self.banks])
+        # per size: the upright classification filters, and the filters of each class
+        self._upright_filters = [np.flatnonzero(bank.class_rolls_deg == 0.0)
+                                 for bank in self.banks]
+        self._class_filters: list[dict[str, list[int]]] = []
+        for bank in self.banks:
+            by_class: dict[str, list[int]] = {}
+            for filter_index, name in enumerate(bank.class_names):
+                by_class.setdefault(name, []).append(filter_index)
+            self._class_filters.append(by_class)
         tiles = (config.clahe_tiles, config.clahe_tiles)
         self._clahe = (cv2.createCLAHE(clipLimit=config.clahe_clip_limit, tileGridSize=tiles)
                        if config.clahe_clip_limit > 0 else None)
@@ -280,9 +289,7 @@ class Classifier:
         source = size if scale == 1.0 else int(round(size / scale))
         top = int(round(y_px - source / 2.0))
         left = int(round(x_px - source / 2.0))
-        rows = np.clip(np.arange(top, top + source), 0, gray.shape[0] - 1)
-        cols = np.clip(np.arange(left, left + source), 0, gray.shape[1] - 1)
-        window = np.ascontiguousarray(gray[rows[:, None], cols[None, :]])
+        window = np.ascontiguousarray(_window(gray, top, left, source))
         if source == size:
             return window, 1.0
         return cv2.resize(window, (size, size), interpolation=cv2.INTER_AREA), size / source
@@ -336,8 +343,7 @@ class Classifier:
         # of those leaders
         lo = max(0, best.bank_index - config.class_size_neighbours)
         hi = min(len(self.banks) - 1, best.bank_index + config.class_size_neighbours)
-        detected_bank = self.banks[best.bank_index]
-        upright = np.flatnonzero(detected_bank.class_rolls_deg == 0.0)
+        upright = self._upright_filters[best.bank_index]
         passes: list[tuple[int, np.ndarray | None]] = [(best.bank_index, upright),
                                                        (best.bank_index, None)]
         passes += [(i, None) for i in range(lo, hi + 1) if i != best.bank_index]
@@ -348,7 +354,9 @@ class Classifier:
             size = bank.class_size
             if chosen is None:
                 assert leaders is not None
-                chosen = np.flatnonzero([n in leaders for n in bank.class_names])
+                class_filters = self._class_filters[index]
+                chosen = np.asarray(sorted(f for n in leaders for f in class_filters.get(n, ())),
+                                    dtype=np.intp)
                 if pass_number == 1:  # the detected size: the leaders' rotated filters
                     chosen = chosen[bank.class_rolls_deg[chosen] != 0.0]
             if chosen.size == 0:
