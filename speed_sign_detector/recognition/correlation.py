@@ -50,7 +50,8 @@ def scene_spectrum(roi: np.ndarray, fft_shape: tuple[int, int], k: float) -> np.
         (Ny, Nx // 2 + 1) complex64.
     """
     roi = np.asarray(roi, dtype=np.float32)
-    centred = roi - np.float32(roi.mean())
+    # roi.mean() without its Python wrapper (the same float32 sum and division)
+    centred = roi - np.float32(np.add.reduce(roi, axis=None) / roi.size)
     if centred.shape != tuple(fft_shape):
         padded = np.zeros(fft_shape, np.float32)
         padded[:centred.shape[0], :centred.shape[1]] = centred
