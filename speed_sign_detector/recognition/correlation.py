@@ -168,9 +168,10 @@ class _PsrLayout:
     sidelobe_count: float
 
 
-@functools.lru_cache(maxsize=1024)
+@functools.lru_cache(maxsize=256)  # ~65 layouts (~3 MB) on GTSRB crops and frames
 def _psr_layout(centre_yx: tuple[int, int], shape: tuple[int, int], search_half: int,
                 sidelobe_half: int, exclude_half: int) -> _PsrLayout:
+    """The :class:`_PsrLayout` of planes of ``shape`` (Ny, Nx) around ``centre_yx``."""
     reach = search_half + sidelobe_half
     rows = (centre_yx[0] + np.arange(-reach, reach + 1)) % shape[0]
     cols = (centre_yx[1] + np.arange(-reach, reach + 1)) % shape[1]
