@@ -16,12 +16,15 @@ import cv2
 import numpy as np
 
 
-def kth_law(spectrum: np.ndarray, k: float) -> np.ndarray:
+def kth_law(spectrum: np.ndarray, k: float, fast: bool = False) -> np.ndarray:
     """Raise spectrum magnitudes to the power ``k``, keeping the phase.
 
     Args:
         spectrum: complex array of any shape.
         k: exponent in [0, 1] (1 = unchanged, 0 = phase only).
+        fast: for k = 0.5, scale by 1 / sqrt in float64 (4 times faster than the float32
+            power; equal to it but for ~0.06% of the values, 1 float32 ulp apart there).
+            Filter synthesis keeps the power, so that built banks equal cached ones.
 
     Returns:
         complex64 array of the same shape (zero where the input is zero).
@@ -30,8 +33,14 @@ def kth_law(spectrum: np.ndarray, k: float) -> np.ndarray:
     if k == 1.0:
         return spectrum.astype(np.complex64, copy=False)
     magnitude = np.abs(spectrum).astype(np.float32, copy=False)
-    scale = np.zeros_like(magnitude)
-    np.power(magnitude, np.float32(k - 1.0), out=scale, where=magnitude > 1e-12)
+    if fast and k == 0.5:
+        with np.errstate(divide='ignore'):
+            root = np.sqrt(magnitude.astype(np.float64))
+            scale = np.divide(1.0, root, out=root).astype(np.float32)
+        scale[magnitude <= 1e-12] = 0.0
+    else:
+        scale = np.zeros_like(magnitude)
+        np.power(magnitude, np.float32(k - 1.0), out=scale, where=magnitude > 1e-12)
     return (spectrum * scale).astype(np.complex64, copy=False)
 
 
@@ -57,7 +66,7 @@ def scene_spectrum(roi: np.ndarray, fft_shape: tuple[int, int], k: float) -> np.
     # the full spectrum as (Ny, Nx, 2) float32 (real, imaginary) pairs
     full = cv2.dft(centred, flags=cv2.DFT_COMPLEX_OUTPUT)
     half = full[:, :fft_shape[1] // 2 + 1].view(np.complex64)[..., 0]
-    return kth_law(half, k)
+    return kth_law(half, k, fast=True)
 
 
 def correlate(scene: np.ndarray, conj_filters: np.ndarray, fft_shape: tuple[int, int]
