@@ -179,6 +179,15 @@ class Classifier:
         self.banks: tuple[SizeBank, ...] = build_banks(config, trained_bank.class_examples)
         self.build_time_s = time.perf_counter() - start
         self._radii = np.asarray([bank.radius_px for bank in self.banks])
+        # per size: the upright classification filters, and the filters of each class
+        self._upright_filters = [np.flatnonzero(bank.class_rolls_deg == 0.0)
+                                 for bank in self.banks]
+        self._class_filters: list[dict[str, list[int]]] = []
+        for bank in self.banks:
+            by_class: dict[str, list[int]] = {}
+            for filter_index, name in enumerate(bank.class_names):
+                by_class.setdefault(name, []).append(filter_index)
+            self._class_filters.append(by_class)
         tiles = (config.clahe_tiles, config.clahe_tiles)
         self._clahe = (cv2.createCLAHE(clipLimit=config.clahe_clip_limit, tileGridSize=tiles)
                        if config.clahe_clip_limit > 0 else None)
@@ -282,9 +291,7 @@ class Classifier:
         source = size if scale == 1.0 else int(round(size / scale))
         top = int(round(y_px - source / 2.0))
         left = int(round(x_px - source / 2.0))
-        rows = np.clip(np.arange(top, top + source), 0, gray.shape[0] - 1)
-        cols = np.clip(np.arange(left, left + source), 0, gray.shape[1] - 1)
-        window = np.ascontiguousarray(gray[rows[:, None], cols[None, :]])
+        window = np.ascontiguousarray(_window(gray, top, left, source))
         if source == size:
             return window, 1.0
         return cv2.resize(window, (size, size), interpolation=cv2.INTER_AREA), size / source
@@ -338,8 +345,7 @@ class Classifier:
         # of those leaders
         lo = max(0, best.bank_index - config.class_size_neighbours)
         hi = min(len(self.banks) - 1, best.bank_index + config.class_size_neighbours)
-        detected_bank = self.banks[best.bank_index]
-        upright = np.flatnonzero(detected_bank.class_rolls_deg == 0.0)
+        upright = self._upright_filters[best.bank_index]
         passes: list[tuple[int, np.ndarray | None]] = [(best.bank_index, upright),
                                                        (best.bank_index, None)]
         passes += [(i, None) for i in range(lo, hi + 1) if i != best.bank_index]
@@ -350,7 +356,9 @@ class Classifier:
             size = bank.class_size
             if chosen is None:
                 assert leaders is not None
-                chosen = np.flatnonzero([n in leaders for n in bank.class_names])
+                class_filters = self._class_filters[index]
+                chosen = np.asarray(sorted(f for n in leaders for f in class_filters.get(n, ())),
+                                    dtype=np.intp)
                 if pass_number == 1:  # the detected size: the leaders' rotated filters
                     chosen = chosen[bank.class_rolls_deg[chosen] != 0.0]
             if chosen.size == 0:
@@ -359,9 +367,7 @@ class Classifier:
                 # window of the classification size around the detected centre
                 top = int(math.floor(centre_y - size / 2.0 + 0.5))
                 left = int(math.floor(centre_x - size / 2.0 + 0.5))
-                rows = np.clip(np.arange(top, top + size), 0, largest - 1)
-                cols = np.clip(np.arange(left, left + size), 0, largest - 1)
-                sub = scene[rows[:, None], cols[None, :]]
+                sub = _window(scene, top, left, size)
                 field = disc_window((size, size), (centre_y - top, centre_x - left),
                                     config.class_field_radius * bank.radius_px)
                 spectra[index] = (scene_spectrum(keep_inside(sub, field), (size, size),
@@ -374,13 +380,13 @@ class Classifier:
             expect_x = int(round(centre_x - left - size / 2.0))
             search = max(1, int(round(config.class_position_search * bank.radius_px)))
             stats = peak_psr(planes, (expect_y, expect_x), search, *self._lobes(bank.radius_px))
-            shift_y = (stats.y + size // 2) % size - size // 2  # circular -> signed
-            shift_x = (stats.x + size // 2) % size - size // 2
-            for f, filter_index in enumerate(chosen):
+            # circular -> signed shifts, then the sign's centre in ROI pixels
+            centre_xs = ((stats.x + size // 2) % size - size // 2 + left + size / 2.0).tolist()
+            centre_ys = ((stats.y + size // 2) % size - size // 2 + top + size / 2.0).tolist()
+            rolls = bank.class_rolls_deg[chosen].tolist()
+            for f, (filter_index, psr) in enumerate(zip(chosen.tolist(), stats.psr.tolist())):
                 found.setdefault(bank.class_names[filter_index], []).append((
-                    float(stats.psr[f]), float(left + shift_x[f] + size / 2.0),
-                    float(top + shift_y[f] + size / 2.0), bank.radius_px,
-                    float(bank.class_rolls_deg[filter_index])))
+                    psr, centre_xs[f], centre_ys[f], bank.radius_px, rolls[f]))
             if pass_number == 0:
                 ranked = sorted(found, key=lambda n: -max(e[0] for e in found[n]))
                 leaders = set(ranked[:config.class_neighbour_classes])
@@ -389,7 +395,7 @@ class Classifier:
         # a class scores the mean of its few best filters (sizes x rotations): steadier
         # than the single best one
         top = config.class_score_top
-        scores = {name: float(np.mean(sorted(p[0] for p in entries)[-top:]))
+        scores = {name: _mean(sorted(p[0] for p in entries)[-top:])
                   for name, entries in found.items()}
         ranked = tuple(sorted(scores.items(), key=lambda item: -item[1]))
         _, roi_x, roi_y, size_radius, roll = max(found[ranked[0][0]])
@@ -470,6 +476,23 @@ class Classifier:
         sidelobe = max(5, int(round(self.config.sidelobe_window * radius_px)))
         exclude = max(1, int(round(self.config.sidelobe_exclude * radius_px)))
         return sidelobe, min(exclude, sidelobe - 1)
+
+
+def _window(image: np.ndarray, top: int, left: int, size: int) -> np.ndarray:
+    """(size, size) window of ``image`` at (top, left); outside the image its border is
+    replicated. A view when the window lies inside."""
+    height, width = image.shape
+    if top >= 0 and left >= 0 and top + size <= height and left + size <= width:
+        return image[top:top + size, left:left + size]
+    rows = np.clip(np.arange(top, top + size), 0, height - 1)
+    cols = np.clip(np.arange(left, left + size), 0, width - 1)
+    return image[rows[:, None], cols[None, :]]
+
+
+def _mean(values: Sequence[float]) -> float:
+    """Mean of a few floats: the same float as ``numpy.mean`` (which adds fewer than 8
+    values in order) without the cost of making an array."""
+    return sum(values) / len(values) if len(values) < 8 else float(np.mean(values))
 
 
 def _detection_psr(found: CorrelationEvidence | Classification) -> float:
