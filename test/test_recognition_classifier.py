@@ -174,6 +174,22 @@ def test_one_result_per_candidate_in_order(classifier: Classifier) -> None:
     assert classifier.classify(frame, []) == ()
 
 
+
+def test_candidates_correlated_together_answer_as_one_by_one(classifier: Classifier) -> None:
+    # evidence_for_candidates shares products, inverse FFTs and peak searches between
+    # the positions; each answer must be exactly that of the position alone
+    frame = make_scene('50', 15.0, seed=3)
+    frame[:, 120:] = make_scene('80', 22.0, seed=5)[:, 120:]
+    positions = [(80.0, 60.0, 15.0), (80.5, 59.0, 12.0), (10.0, 10.0, 8.0),
+                 (math.nan, 60.0, 15.0), (80.0, 60.0, 2.0), (80.0, 60.0, 60.0),
+                 (-30.0, 500.0, 12.0), (80.0, 60.0, 15.0)]
+    together = classifier.evidence_for_candidates(frame, positions)
+    assert len(together) == len(positions)
+    assert not isinstance(together[0], Classification)  # a sign found there
+    for position, found in zip(positions, together):
+        alone = classifier.evidence_at(frame, *position)
+        assert repr(found) == repr(alone)
+
 @pytest.mark.parametrize('bad', [np.zeros((0, 0), np.uint8), np.zeros((20, 20, 3), np.uint8),
                                  np.zeros((20, 20), np.float32), [[1, 2], [3, 4]]])
 def test_bad_images_raise_clear_errors(classifier: Classifier, bad: object) -> None:

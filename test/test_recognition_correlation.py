@@ -91,6 +91,18 @@ def test_batched_correlation_equals_one_by_one(filter_50: np.ndarray) -> None:
         np.testing.assert_allclose(batched[index], single, atol=1e-5)
 
 
+
+def test_peak_psr_per_plane_centres_equal_one_plane_at_a_time() -> None:
+    planes = np.random.default_rng(3).standard_normal((5, 32, 40)).astype(np.float32)
+    centres = np.array([[6, 6], [6, 6], [0, 39], [31, 2], [16, 20]])
+    searches = np.array([4, 2, 3, 1, 4])
+    together = peak_psr(planes, centres, searches, 7, 2)
+    for index in range(5):
+        alone = peak_psr(planes[index:index + 1], tuple(centres[index]), int(searches[index]),
+                         7, 2)
+        for name in ('value', 'y', 'x', 'psr'):
+            assert getattr(together, name)[index] == getattr(alone, name)[0], name
+
 def test_peak_psr_rejects_bad_windows() -> None:
     with pytest.raises(ValueError):
         peak_psr(np.zeros((1, 16, 16), np.float32), (8, 8), 2, 3, 3)

@@ -33,18 +33,15 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 from speed_sign_detector.config import ClassifierConfig
 from speed_sign_detector.detection.candidates import Candidate
 from speed_sign_detector.errors import BankFileError, ClassifierInputError
-from speed_sign_detector.recognition.correlation import (
-    correlate,
-    disc_window,
-    keep_inside,
-    peak_psr,
-    scene_spectrum,
+from speed_sign_detector.recognition.candidate_evidence import (  # noqa: F401 (re-exported)
+    CorrelationEvidence,
+    EvidenceSearch,
+    NoSignFound,
 )
 from speed_sign_detector.recognition.filter_banks import (  # noqa: F401 (re-exported)
     CLASS_TEMPLATES,
@@ -114,37 +111,6 @@ def _label_of(class_name: str) -> str:
 
 
 
-@dataclass(frozen=True)
-class CorrelationEvidence:
-    """What the correlation filters measured at one sign position.
-
-    Attributes:
-        ranked: (class name, score) of every class correlated, best first; the score is
-            the mean PSR of the class's ``class_score_top`` best filters.
-        x_px, y_px: the sign's centre from the winning class's best filter, frame pixels.
-        radius_px: the sign's radius (that filter's size), frame pixels.
-        rotation_deg: in-plane rotation of that filter, degrees counter-clockwise.
-        detection_psr: PSR of the best detection filter (dimensionless).
-    """
-
-    ranked: tuple[tuple[str, float], ...]
-    x_px: float
-    y_px: float
-    radius_px: float
-    rotation_deg: float
-    detection_psr: float
-
-
-@dataclass(frozen=True)
-class _Scored:
-    """Best detection result of one candidate."""
-
-    bank_index: int
-    psr: float
-    peak_y: int
-    peak_x: int
-
-
 class Classifier:
     """Reads speed-limit signs at candidate positions with kth-law MACE filter banks.
 
@@ -178,19 +144,7 @@ class Classifier:
         self.trained_bank = trained_bank
         self.banks: tuple[SizeBank, ...] = build_banks(config, trained_bank.class_examples)
         self.build_time_s = time.perf_counter() - start
-        self._radii = np.asarray([bank.radius_px for bank in self.banks])
-        # per size: the upright classification filters, and the filters of each class
-        self._upright_filters = [np.flatnonzero(bank.class_rolls_deg == 0.0)
-                                 for bank in self.banks]
-        self._class_filters: list[dict[str, list[int]]] = []
-        for bank in self.banks:
-            by_class: dict[str, list[int]] = {}
-            for filter_index, name in enumerate(bank.class_names):
-                by_class.setdefault(name, []).append(filter_index)
-            self._class_filters.append(by_class)
-        tiles = (config.clahe_tiles, config.clahe_tiles)
-        self._clahe = (cv2.createCLAHE(clipLimit=config.clahe_clip_limit, tileGridSize=tiles)
-                       if config.clahe_clip_limit > 0 else None)
+        self._evidence = EvidenceSearch(config, self.banks)
         _LOG.debug('classifier banks: %d sizes, %.1f MB, %.2f s', len(self.banks),
                    self.bank_nbytes / 1e6, self.build_time_s)
 
@@ -202,7 +156,7 @@ class Classifier:
     @property
     def min_radius_px(self) -> float:
         """Smallest sign radius the banks cover, pixels."""
-        return float(self._radii[0])
+        return float(self._evidence.radii[0])
 
     def classify(self, gray: np.ndarray, candidates: Sequence[Candidate]
                  ) -> tuple[Classification, ...]:
@@ -221,8 +175,9 @@ class Classifier:
         """
         gray = _check_gray(gray, 'gray')
         scale = self.config.candidate_radius_scale
-        return tuple(self._classify_at(gray, c.x_px, c.y_px, c.radius_px * scale)
-                     for c in candidates)
+        found = self.evidence_for_candidates(
+            gray, [(c.x_px, c.y_px, c.radius_px * scale) for c in candidates])
+        return tuple(self.decide(gray, evidence) for evidence in found)
 
     def classify_crop(self, crop: np.ndarray, framing: str | None = None) -> Classification:
         """Classify a crop holding one centred sign.
@@ -256,9 +211,9 @@ class Classifier:
         framing = framing or self.config.crop_framing
         framings = ('margin', 'tight') if framing == 'auto' else (framing,)
         best: CorrelationEvidence | Classification | None = None
-        for name in framings:
-            found = self.evidence_at(crop, width / 2.0, height / 2.0,
-                                     crop_sign_radius(crop.shape, name))
+        for found in self.evidence_for_candidates(
+                crop, [(width / 2.0, height / 2.0, crop_sign_radius(crop.shape, name))
+                       for name in framings]):
             if best is None or _detection_psr(found) > _detection_psr(best):
                 best = found
         assert best is not None
@@ -274,28 +229,6 @@ class Classifier:
 
     # -- internals ---------------------------------------------------------------------
 
-    @staticmethod
-    def _roi(gray: np.ndarray, x_px: float, y_px: float, size: int,
-             scale: float = 1.0) -> tuple[np.ndarray, float]:
-        """(size, size) uint8 window centred on (x, y), resampled by ``scale``; outside
-        the frame the border pixels are replicated.
-
-        Returns the window and the scale actually applied (a reduction rounds the source
-        window to whole pixels).
-        """
-        if scale > 1.0:  # magnify, bilinear
-            matrix = np.float32([[scale, 0.0, size / 2.0 - x_px * scale],
-                                 [0.0, scale, size / 2.0 - y_px * scale]])
-            return cv2.warpAffine(gray, matrix, (size, size), flags=cv2.INTER_LINEAR,
-                                  borderMode=cv2.BORDER_REPLICATE), scale
-        source = size if scale == 1.0 else int(round(size / scale))
-        top = int(round(y_px - source / 2.0))
-        left = int(round(x_px - source / 2.0))
-        window = np.ascontiguousarray(_window(gray, top, left, source))
-        if source == size:
-            return window, 1.0
-        return cv2.resize(window, (size, size), interpolation=cv2.INTER_AREA), size / source
-
     def _no_sign(self, x_px: float, y_px: float, radius_px: float, psr: float = 0.0
                  ) -> Classification:
         return Classification(LABEL_NO_SIGN, None, psr, radius_px, 0.0, 0.0, x_px, y_px)
@@ -309,103 +242,31 @@ class Classifier:
             "no sign" :class:`Classification` when no detection filter finds a sign there
             (or the position or size is unusable).
         """
-        config = self.config
-        if not (math.isfinite(x_px) and math.isfinite(y_px) and math.isfinite(radius_px)):
-            return self._no_sign(float(x_px), float(y_px), float(radius_px))
-        if radius_px < config.min_sign_radius_px or radius_px <= 0:
-            return self._no_sign(x_px, y_px, radius_px)
-        # signs smaller than the smallest filters are magnified to their size, signs
-        # larger than the largest reduced
-        scale = max(1.0, self.min_radius_px * config.magnify_margin / radius_px)
-        largest_radius = float(self._radii[-1])
-        if radius_px > largest_radius / config.magnify_margin:
-            scale = largest_radius / config.magnify_margin / radius_px
-        radius_scaled = radius_px * scale
-        low = radius_scaled / config.size_search_ratio
-        high = radius_scaled * config.size_search_ratio
-        indices = [i for i, r in enumerate(self._radii) if low <= r <= high]
-        if not indices:
-            return self._no_sign(x_px, y_px, radius_px)
-        largest = max(self.banks[i].fft_size for i in indices)
-        raw, scale = self._roi(gray, x_px, y_px, largest, scale)
-        enhanced = self._clahe.apply(raw) if self._clahe is not None else raw
-        best = self._detect(enhanced, indices, largest, radius_scaled)
-        if best.psr < config.detection_psr_threshold:
-            return self._no_sign(x_px, y_px, radius_px, best.psr)
-        det_bank = self.banks[best.bank_index]
-        det_offset = (largest - det_bank.fft_size) // 2
-        # sign centre in ROI pixel coordinates (continuous)
-        centre_y = best.peak_y + det_offset + det_bank.canvas_px / 2.0
-        centre_x = best.peak_x + det_offset + det_bank.canvas_px / 2.0
-        scene = enhanced if config.clahe_for_classification else raw
-        # every classification filter's PSR, by class name: (psr, x, y, radius, roll)
-        found: dict[str, list[tuple[float, float, float, float, float]]] = {}
-        # coarse to fine: at the detected size the upright filters of every class, then
-        # the rotated ones of the leading classes; at the neighbouring sizes all filters
-        # of those leaders
-        lo = max(0, best.bank_index - config.class_size_neighbours)
-        hi = min(len(self.banks) - 1, best.bank_index + config.class_size_neighbours)
-        upright = self._upright_filters[best.bank_index]
-        passes: list[tuple[int, np.ndarray | None]] = [(best.bank_index, upright),
-                                                       (best.bank_index, None)]
-        passes += [(i, None) for i in range(lo, hi + 1) if i != best.bank_index]
-        spectra: dict[int, tuple[np.ndarray, int, int]] = {}
-        leaders: set[str] | None = None
-        for pass_number, (index, chosen) in enumerate(passes):
-            bank = self.banks[index]
-            size = bank.class_size
-            if chosen is None:
-                assert leaders is not None
-                class_filters = self._class_filters[index]
-                chosen = np.asarray(sorted(f for n in leaders for f in class_filters.get(n, ())),
-                                    dtype=np.intp)
-                if pass_number == 1:  # the detected size: the leaders' rotated filters
-                    chosen = chosen[bank.class_rolls_deg[chosen] != 0.0]
-            if chosen.size == 0:
-                continue
-            if index not in spectra:
-                # window of the classification size around the detected centre
-                top = int(math.floor(centre_y - size / 2.0 + 0.5))
-                left = int(math.floor(centre_x - size / 2.0 + 0.5))
-                sub = _window(scene, top, left, size)
-                field = disc_window((size, size), (centre_y - top, centre_x - left),
-                                    config.class_field_radius * bank.radius_px)
-                spectra[index] = (scene_spectrum(keep_inside(sub, field), (size, size),
-                                                 config.kth_law), top, left)
-            spectrum, top, left = spectra[index]
-            planes = correlate(spectrum, bank.classification[chosen], (size, size))
-            # the template's centre is at size / 2: the peak lies near the offset of the
-            # detected centre from the window's centre
-            expect_y = int(round(centre_y - top - size / 2.0))
-            expect_x = int(round(centre_x - left - size / 2.0))
-            search = max(1, int(round(config.class_position_search * bank.radius_px)))
-            stats = peak_psr(planes, (expect_y, expect_x), search, *self._lobes(bank.radius_px))
-            # circular -> signed shifts, then the sign's centre in ROI pixels
-            centre_xs = ((stats.x + size // 2) % size - size // 2 + left + size / 2.0).tolist()
-            centre_ys = ((stats.y + size // 2) % size - size // 2 + top + size / 2.0).tolist()
-            rolls = bank.class_rolls_deg[chosen].tolist()
-            for f, (filter_index, psr) in enumerate(zip(chosen.tolist(), stats.psr.tolist())):
-                found.setdefault(bank.class_names[filter_index], []).append((
-                    psr, centre_xs[f], centre_ys[f], bank.radius_px, rolls[f]))
-            if pass_number == 0:
-                ranked = sorted(found, key=lambda n: -max(e[0] for e in found[n]))
-                leaders = set(ranked[:config.class_neighbour_classes])
-        if not found:
-            return self._no_sign(x_px, y_px, radius_px)
-        # a class scores the mean of its few best filters (sizes x rotations): steadier
-        # than the single best one
-        top = config.class_score_top
-        scores = {name: _mean(sorted(p[0] for p in entries)[-top:])
-                  for name, entries in found.items()}
-        ranked = tuple(sorted(scores.items(), key=lambda item: -item[1]))
-        _, roi_x, roi_y, size_radius, roll = max(found[ranked[0][0]])
-        return CorrelationEvidence(ranked, x_px + (roi_x - largest / 2.0) / scale,
-                                   y_px + (roi_y - largest / 2.0) / scale, size_radius / scale,
-                                   roll, best.psr)
+        return self.evidence_for_candidates(gray, [(x_px, y_px, radius_px)])[0]
 
-    def _classify_at(self, gray: np.ndarray, x_px: float, y_px: float, radius_px: float
-                     ) -> Classification:
-        return self.decide(gray, self.evidence_at(gray, x_px, y_px, radius_px))
+    def evidence_for_candidates(self, gray: np.ndarray,
+                                positions: Sequence[tuple[float, float, float]]
+                                ) -> list[CorrelationEvidence | Classification]:
+        """:meth:`evidence_at` for several signs of one image, correlated together (the
+        same answers, faster).
+
+        Args:
+            gray: (H, W) uint8 image.
+            positions: (x, y, radius) of each sign, pixels.
+
+        Returns:
+            One result per position, in order.
+        """
+        found: list[CorrelationEvidence | Classification] = []
+        for (x_px, y_px, radius_px), evidence in zip(
+                positions, self._evidence.evidence(gray, positions), strict=True):
+            if isinstance(evidence, NoSignFound):
+                if not (math.isfinite(x_px) and math.isfinite(y_px)
+                        and math.isfinite(radius_px)):
+                    x_px, y_px, radius_px = float(x_px), float(y_px), float(radius_px)
+                evidence = self._no_sign(x_px, y_px, radius_px, evidence.detection_psr)
+            found.append(evidence)
+        return found
 
     def _decide(self, gray: np.ndarray, evidence: CorrelationEvidence,
                 use_second_opinion: bool = True) -> Classification:
@@ -449,50 +310,6 @@ class Classifier:
                                   frame_x, frame_y)
         return Classification(label, int(label) if label.isdigit() else None, psr,
                               size_radius, roll, margin, frame_x, frame_y)
-
-    def _detect(self, roi: np.ndarray, indices: Sequence[int], largest: int,
-                radius_px: float) -> _Scored:
-        """Best detection filter (size) and its peak, among the banks ``indices``."""
-        best: _Scored | None = None
-        for index in indices:
-            bank = self.banks[index]
-            size = bank.fft_size
-            offset = (largest - size) // 2
-            sub = roi[offset:offset + size, offset:offset + size]
-            planes = correlate(scene_spectrum(sub, (size, size), self.config.kth_law),
-                               bank.detection, (size, size))
-            centre = (size - bank.canvas_px) // 2
-            search = max(1, int(math.ceil(self.config.position_search * radius_px)))
-            stats = peak_psr(planes, (centre, centre), search, *self._lobes(bank.radius_px))
-            top = int(np.argmax(stats.psr))
-            if best is None or stats.psr[top] > best.psr:
-                best = _Scored(index, float(stats.psr[top]), int(stats.y[top]),
-                               int(stats.x[top]))
-        assert best is not None  # indices is never empty
-        return best
-
-    def _lobes(self, radius_px: float) -> tuple[int, int]:
-        """PSR window half sizes (sidelobe square, excluded centre) for a sign radius."""
-        sidelobe = max(5, int(round(self.config.sidelobe_window * radius_px)))
-        exclude = max(1, int(round(self.config.sidelobe_exclude * radius_px)))
-        return sidelobe, min(exclude, sidelobe - 1)
-
-
-def _window(image: np.ndarray, top: int, left: int, size: int) -> np.ndarray:
-    """(size, size) window of ``image`` at (top, left); outside the image its border is
-    replicated. A view when the window lies inside."""
-    height, width = image.shape
-    if top >= 0 and left >= 0 and top + size <= height and left + size <= width:
-        return image[top:top + size, left:left + size]
-    rows = np.clip(np.arange(top, top + size), 0, height - 1)
-    cols = np.clip(np.arange(left, left + size), 0, width - 1)
-    return image[rows[:, None], cols[None, :]]
-
-
-def _mean(values: Sequence[float]) -> float:
-    """Mean of a few floats: the same float as ``numpy.mean`` (which adds fewer than 8
-    values in order) without the cost of making an array."""
-    return sum(values) / len(values) if len(values) < 8 else float(np.mean(values))
 
 
 def _detection_psr(found: CorrelationEvidence | Classification) -> float:

@@ -10,6 +10,7 @@ scene with a filter is the filter's match with its top-left corner at scene pixe
 from __future__ import annotations
 
 import functools
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -55,6 +56,27 @@ def scene_spectrum(roi: np.ndarray, fft_shape: tuple[int, int], k: float) -> np.
     Returns:
         (Ny, Nx // 2 + 1) complex64.
     """
+    return kth_law(_half_spectrum(roi, fft_shape), k, fast=True)
+
+
+def scene_spectra(rois: Sequence[np.ndarray], fft_shape: tuple[int, int], k: float
+                  ) -> np.ndarray:
+    """:func:`scene_spectrum` of several ROIs for one FFT size, stacked (the same values).
+
+    Args:
+        rois: S (h, w) real arrays with h <= Ny and w <= Nx.
+        fft_shape: (Ny, Nx).
+        k: kth-law exponent.
+
+    Returns:
+        (S, Ny, Nx // 2 + 1) complex64.
+    """
+    return kth_law(np.stack([_half_spectrum(roi, fft_shape) for roi in rois]), k, fast=True)
+
+
+def _half_spectrum(roi: np.ndarray, fft_shape: tuple[int, int]) -> np.ndarray:
+    """(Ny, Nx // 2 + 1) complex64 half spectrum of a zero-mean ROI (a view of the full
+    one); see :func:`scene_spectrum`."""
     roi = np.asarray(roi, dtype=np.float32)
     # roi.mean() without its Python wrapper (the same float32 sum and division)
     centred = roi - np.float32(np.add.reduce(roi, axis=None) / roi.size)
@@ -65,24 +87,40 @@ def scene_spectrum(roi: np.ndarray, fft_shape: tuple[int, int], k: float) -> np.
     # OpenCV's real FFT is 2 to 4 times faster than numpy's at these sizes; it returns
     # the full spectrum as (Ny, Nx, 2) float32 (real, imaginary) pairs
     full = cv2.dft(centred, flags=cv2.DFT_COMPLEX_OUTPUT)
-    half = full[:, :fft_shape[1] // 2 + 1].view(np.complex64)[..., 0]
-    return kth_law(half, k, fast=True)
+    return full[:, :fft_shape[1] // 2 + 1].view(np.complex64)[..., 0]
 
 
 def correlate(scene: np.ndarray, conj_filters: np.ndarray, fft_shape: tuple[int, int]
               ) -> np.ndarray:
-    """Correlation planes of one scene spectrum with a stack of filters.
+    """Correlation planes of scene spectra with filters, in one batched inverse FFT.
 
     Args:
-        scene: (Ny, Nx // 2 + 1) complex64 scene spectrum (kth-law already applied).
-        conj_filters: (F, Ny, Nx // 2 + 1) complex64 CONJUGATED filter spectra
-            (``np.conj(H)``, stored so at bank build time).
+        scene: (..., Ny, Nx // 2 + 1) complex64 scene spectra (kth-law already applied):
+            one scene (Ny, Nx // 2 + 1) for every filter, or a stack that broadcasts
+            with ``conj_filters`` over the leading axes (e.g. (S, 1, ...) scenes with
+            (F, ...) filters give (S, F) planes; (P, ...) with (P, ...) pairs them).
+        conj_filters: (..., Ny, Nx // 2 + 1) complex64 CONJUGATED filter spectra
+            (``np.conj(H)``, stored so at bank build time), e.g. (F, Ny, Nx // 2 + 1).
         fft_shape: (Ny, Nx).
 
     Returns:
-        (F, Ny, Nx) float32 correlation planes (one batched inverse FFT).
+        (..., Ny, Nx) float32 correlation planes, the leading axes broadcast from both
+        inputs ((F, Ny, Nx) for one scene and F filters).
     """
-    product = conj_filters * scene[None]
+    return inverse_planes(conj_filters * scene, fft_shape)
+
+
+def inverse_planes(product: np.ndarray, fft_shape: tuple[int, int]) -> np.ndarray:
+    """Correlation planes from the products of filter and scene spectra (what
+    :func:`correlate` does after the product; ``product`` is overwritten).
+
+    Args:
+        product: (..., Ny, Nx // 2 + 1) complex64 products ``conj(H) * S``.
+        fft_shape: (Ny, Nx).
+
+    Returns:
+        (..., Ny, Nx) float32 planes.
+    """
     # irfft2 by its two passes, the first in place (saves a complex array per call)
     np.fft.ifft(product, axis=-2, out=product)
     return np.fft.irfft(product, n=fft_shape[1], axis=-1).astype(np.float32, copy=False)
@@ -104,19 +142,22 @@ class PeakStats:
     psr: np.ndarray
 
 
-def peak_psr(planes: np.ndarray, centre_yx: tuple[int, int], search_half: int,
-             sidelobe_half: int, exclude_half: int) -> PeakStats:
+def peak_psr(planes: np.ndarray, centre_yx: tuple[int, int] | np.ndarray,
+             search_half: int | np.ndarray, sidelobe_half: int, exclude_half: int
+             ) -> PeakStats:
     """Find each plane's peak near a point and its peak-to-sidelobe ratio.
 
     The peak is the maximum inside the square ``centre +/- search_half`` (circular
-    indices). PSR = (peak - mean) / std over the square ``peak +/- sidelobe_half``
-    without the central square ``peak +/- exclude_half``.
+    indices; the first one row by row on a tie). PSR = (peak - mean) / std over the square
+    ``peak +/- sidelobe_half`` without the central square ``peak +/- exclude_half``.
 
     Args:
         planes: (F, Ny, Nx) float32 correlation planes.
-        centre_yx: where the peak is expected.
-        search_half, sidelobe_half, exclude_half: half sizes in pixels
-            (``exclude_half < sidelobe_half``).
+        centre_yx: where the peak is expected: (y, x) for every plane, or (F, 2) integer
+            (y, x) rows, one per plane.
+        search_half: peak search half size in pixels, for every plane or (F,) integers.
+        sidelobe_half, exclude_half: half sizes in pixels (``exclude_half <
+            sidelobe_half``).
 
     Returns:
         :class:`PeakStats` with arrays of shape (F,).
@@ -124,16 +165,45 @@ def peak_psr(planes: np.ndarray, centre_yx: tuple[int, int], search_half: int,
     count, ny, nx = planes.shape
     if exclude_half >= sidelobe_half:
         raise ValueError('exclude_half must be smaller than sidelobe_half')
-    layout = _psr_layout((int(centre_yx[0]), int(centre_yx[1])), (ny, nx), search_half,
-                         sidelobe_half, exclude_half)
-    # every sidelobe square lies in one block, centre +/- (search_half + sidelobe_half):
-    # copy that block once, then read each plane's square from a strided view of it
-    block_side = layout.block_side
-    block = planes.reshape(count, -1).take(layout.block_indices, axis=1).reshape(
-        count, block_side, block_side)
-    search_side = 2 * search_half + 1
+    centres = np.asarray(centre_yx).reshape(-1, 2)
+    searches = np.asarray(search_half).reshape(-1)
+    if len(centres) > 1 and (centres == centres[0]).all():
+        centres = centres[:1]
+    if len(searches) > 1 and (searches == searches[0]).all():
+        searches = searches[:1]
+    if len(centres) == 1 and len(searches) == 1:
+        layout = _psr_layout((int(centres[0, 0]), int(centres[0, 1])), (ny, nx),
+                             int(searches[0]), sidelobe_half, exclude_half)
+        # every sidelobe square lies in one block, centre +/- (search_half +
+        # sidelobe_half): copy that block once, then read each plane's square from a
+        # strided view of it
+        block_side = layout.block_side
+        block = planes.reshape(count, -1).take(layout.block_indices, axis=1).reshape(
+            count, block_side, block_side)
+        rows = cols = None
+        search_widest = int(searches[0])
+    else:
+        # per-plane centres or search sizes: each plane's block around its own centre,
+        # as wide as the widest search needs
+        search_widest = int(searches.max())
+        offsets = np.arange(-(search_widest + sidelobe_half), search_widest + sidelobe_half + 1)
+        centres = np.broadcast_to(centres, (count, 2))
+        rows = (centres[:, :1] + offsets) % ny
+        cols = (centres[:, 1:] + offsets) % nx
+        block_side = offsets.size
+        flat = (rows[:, :, None] * nx + cols[:, None, :]).reshape(count, -1)
+        block = np.take_along_axis(planes.reshape(count, -1), flat, axis=1).reshape(
+            count, block_side, block_side)
+    search_side = 2 * search_widest + 1
     window = block[:, sidelobe_half:sidelobe_half + search_side,
                    sidelobe_half:sidelobe_half + search_side].reshape(count, -1)
+    if len(searches) > 1:
+        # a plane's narrower search square: the rest of the widest one cannot win (row by
+        # row order within the narrower square is kept, so ties resolve alike)
+        outside = np.abs(np.arange(search_side) - search_widest)[None, :] > searches[:, None]
+        window = window.reshape(count, search_side, search_side)  # a copy already
+        window[outside[:, :, None] | outside[:, None, :]] = -np.inf
+        window = window.reshape(count, -1)
     best = window.argmax(axis=1)
     peak_value = window.max(axis=1)
     best_y, best_x = np.divmod(best, search_side)
@@ -141,21 +211,38 @@ def peak_psr(planes: np.ndarray, centre_yx: tuple[int, int], search_half: int,
     squares = np.ndarray((count, search_side, search_side, lobe_side, lobe_side), block.dtype,
                          block, 0, block.strides + block.strides[1:])
     region = squares[np.arange(count), best_y, best_x].reshape(count, -1).astype(np.float64)
+    weights, sidelobe_count = _sidelobe_weights(sidelobe_half, exclude_half)
     # mean and standard deviation from the sums in one pass, in float64 (numpy's std
     # takes two; the PSR agrees to float32 rounding); the weights drop the centre
-    mean = region @ layout.sidelobe_weights / layout.sidelobe_count
+    mean = region @ weights / sidelobe_count
     np.square(region, out=region)
-    variance = region @ layout.sidelobe_weights / layout.sidelobe_count - mean * mean
+    variance = region @ weights / sidelobe_count - mean * mean
     std = np.sqrt(np.maximum(variance, 0.0))
     psr = (peak_value - mean) / np.maximum(std, np.float32(1e-12))
-    return PeakStats(peak_value, layout.search_rows[best_y], layout.search_cols[best_x],
-                     psr.astype(np.float32))
+    if rows is None:
+        peak_y, peak_x = layout.search_rows[best_y], layout.search_cols[best_x]
+    else:
+        every = np.arange(count)
+        peak_y = rows[every, sidelobe_half + best_y]
+        peak_x = cols[every, sidelobe_half + best_x]
+    return PeakStats(peak_value, peak_y, peak_x, psr.astype(np.float32))
+
+
+@functools.lru_cache(maxsize=64)
+def _sidelobe_weights(sidelobe_half: int, exclude_half: int) -> tuple[np.ndarray, float]:
+    """((2 * sidelobe_half + 1) ** 2,) float64 weights, row by row: 1, and 0 in the
+    excluded central square; and their sum (read-only, cached)."""
+    weights = np.ones((2 * sidelobe_half + 1, 2 * sidelobe_half + 1))
+    inner = slice(sidelobe_half - exclude_half, sidelobe_half + exclude_half + 1)
+    weights[inner, inner] = 0.0
+    weights = weights.reshape(-1)
+    weights.flags.writeable = False
+    return weights, float(weights.sum())
 
 
 @dataclass(frozen=True)
 class _PsrLayout:
-    """Index arrays and weights of :func:`peak_psr` for one plane shape, centre and set of
-    half sizes (read-only, cached by :func:`_psr_layout`).
+    """Index arrays of :func:`peak_psr` for one plane shape, centre and set of half sizes (read-only, cached by :func:`_psr_layout`).
 
     Attributes:
         block_side: side of the block that holds every sidelobe square,
@@ -164,17 +251,12 @@ class _PsrLayout:
             (circular).
         search_rows, search_cols: (2 * search_half + 1,) plane rows / columns of the peak
             search square.
-        sidelobe_weights: ((2 * sidelobe_half + 1) ** 2,) float64, row by row: 1, and 0
-            in the excluded central square.
-        sidelobe_count: number of sidelobe pixels (the weights' sum).
     """
 
     block_side: int
     block_indices: np.ndarray
     search_rows: np.ndarray
     search_cols: np.ndarray
-    sidelobe_weights: np.ndarray
-    sidelobe_count: float
 
 
 @functools.lru_cache(maxsize=256)  # ~65 layouts (~3 MB) on GTSRB crops and frames
@@ -184,15 +266,10 @@ def _psr_layout(centre_yx: tuple[int, int], shape: tuple[int, int], search_half:
     reach = search_half + sidelobe_half
     rows = (centre_yx[0] + np.arange(-reach, reach + 1)) % shape[0]
     cols = (centre_yx[1] + np.arange(-reach, reach + 1)) % shape[1]
-    weights = np.ones((2 * sidelobe_half + 1, 2 * sidelobe_half + 1))
-    inner = slice(sidelobe_half - exclude_half, sidelobe_half + exclude_half + 1)
-    weights[inner, inner] = 0.0
     search = slice(sidelobe_half, sidelobe_half + 2 * search_half + 1)
     layout = _PsrLayout(2 * reach + 1, (rows[:, None] * shape[1] + cols[None, :]).reshape(-1),
-                        rows[search], cols[search], weights.reshape(-1),
-                        float(weights.sum()))
-    for array in (layout.block_indices, layout.search_rows, layout.search_cols,
-                  layout.sidelobe_weights):
+                        rows[search], cols[search])
+    for array in (layout.block_indices, layout.search_rows, layout.search_cols):
         array.flags.writeable = False
     return layout
 
