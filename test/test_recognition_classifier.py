@@ -189,6 +189,13 @@ def test_candidates_correlated_together_answer_as_one_by_one(classifier: Classif
     for position, found in zip(positions, together):
         alone = classifier.evidence_at(frame, *position)
         assert repr(found) == repr(alone)
+    # classify: the second opinion's features of all its signs in one call, same answers
+    candidates = [Candidate(x, y, r, 1.0) for x, y, r in positions]
+    scale = classifier.config.candidate_radius_scale
+    assert classifier.trained_bank.second_opinion is not None
+    assert classifier.classify(frame, candidates) == tuple(
+        classifier.decide(frame, classifier.evidence_at(frame, x, y, r * scale))
+        for x, y, r in positions)
 
 @pytest.mark.parametrize('bad', [np.zeros((0, 0), np.uint8), np.zeros((20, 20, 3), np.uint8),
                                  np.zeros((20, 20), np.float32), [[1, 2], [3, 4]]])

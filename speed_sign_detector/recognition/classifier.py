@@ -50,6 +50,7 @@ from speed_sign_detector.recognition.filter_banks import (  # noqa: F401 (re-exp
     bank_radii,
     build_banks,
 )
+from speed_sign_detector.recognition.second_opinion import SecondOpinion
 from speed_sign_detector.recognition.sign_features import (
     FEATURE_SIZE,
     aligned_patches,
@@ -177,7 +178,20 @@ class Classifier:
         scale = self.config.candidate_radius_scale
         found = self.evidence_for_candidates(
             gray, [(c.x_px, c.y_px, c.radius_px * scale) for c in candidates])
-        return tuple(self.decide(gray, evidence) for evidence in found)
+        # the second opinion's features of every sign it will be asked about, in one call
+        opinion = self.trained_bank.second_opinion
+        asked = [index for index, evidence in enumerate(found)
+                 if isinstance(evidence, CorrelationEvidence)
+                 and not self._withheld_by_filters(gray.shape, evidence, opinion)]
+        features: list[np.ndarray | None] = [None] * len(found)
+        if opinion is not None and asked:
+            signs = np.asarray([[found[i].x_px, found[i].y_px, found[i].radius_px]
+                                for i in asked])
+            for index, row in zip(asked, sign_features(aligned_patches(gray, signs))):
+                features[index] = row
+        return tuple(evidence if isinstance(evidence, Classification)
+                     else self._decide(gray, evidence, features=row)
+                     for evidence, row in zip(found, features))
 
     def classify_crop(self, crop: np.ndarray, framing: str | None = None) -> Classification:
         """Classify a crop holding one centred sign.
@@ -268,28 +282,42 @@ class Classifier:
             found.append(evidence)
         return found
 
+    def _withheld_by_filters(self, shape: tuple[int, ...], evidence: CorrelationEvidence,
+                             opinion: SecondOpinion | None) -> bool:
+        """True when the correlation evidence alone withholds the answer (before any
+        second opinion): its PSR is too small, or the sign is cut by the border of the
+        (H, W) ``shape`` frame."""
+        config = self.config
+        frame_x, frame_y, size_radius = evidence.x_px, evidence.y_px, evidence.radius_px
+        height, width = shape
+        cut_px = max(-frame_x, -frame_y, frame_x - (width - 1),
+                     frame_y - (height - 1)) + size_radius
+        top_psr = evidence.ranked[0][1]
+        return (top_psr < (config.psr_threshold if opinion is None
+                           else config.second_opinion_psr_threshold)
+                or cut_px > config.max_cut_fraction * size_radius)
+
     def _decide(self, gray: np.ndarray, evidence: CorrelationEvidence,
-                use_second_opinion: bool = True) -> Classification:
+                use_second_opinion: bool = True, features: np.ndarray | None = None
+                ) -> Classification:
         """The answer from the correlation evidence: the leading class (or the second
         opinion's choice among the leading classes), or "no sign" when the PSR or the lead
         is too small, the second opinion withholds it, or the sign is cut by the frame
-        border."""
+        border. ``features``: the sign's (FEATURE_SIZE,) second-opinion features when
+        already computed."""
         config = self.config
         labels = [_label_of(name) for name, _ in evidence.ranked]
         label = labels[0]
         frame_x, frame_y, size_radius = evidence.x_px, evidence.y_px, evidence.radius_px
         roll = evidence.rotation_deg
-        height, width = gray.shape
-        cut_px = max(-frame_x, -frame_y, frame_x - (width - 1),
-                     frame_y - (height - 1)) + size_radius
         opinion = self.trained_bank.second_opinion if use_second_opinion else None
         top_psr = evidence.ranked[0][1]
-        withhold = (top_psr < (config.psr_threshold if opinion is None
-                               else config.second_opinion_psr_threshold)
-                    or cut_px > config.max_cut_fraction * size_radius)
+        withhold = self._withheld_by_filters(gray.shape, evidence, opinion)
         if opinion is not None and not withhold:
-            scores = opinion.scores(sign_features(aligned_patches(
-                gray, np.asarray([[frame_x, frame_y, size_radius]]))))[0]
+            if features is None:
+                features = sign_features(aligned_patches(
+                    gray, np.asarray([[frame_x, frame_y, size_radius]])))[0]
+            scores = opinion.scores(features[None])[0]
             # a weak correlation peak needs a clearer second opinion
             min_lead = self.trained_bank.min_lead if top_psr >= config.psr_threshold else \
                 max(self.trained_bank.min_lead, config.second_opinion_low_psr_lead)

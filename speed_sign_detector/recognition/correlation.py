@@ -171,9 +171,10 @@ def peak_psr(planes: np.ndarray, centre_yx: tuple[int, int] | np.ndarray,
         centres = centres[:1]
     if len(searches) > 1 and (searches == searches[0]).all():
         searches = searches[:1]
-    if len(centres) == 1 and len(searches) == 1:
+    search_widest = int(searches.max())
+    if len(centres) == 1:
         layout = _psr_layout((int(centres[0, 0]), int(centres[0, 1])), (ny, nx),
-                             int(searches[0]), sidelobe_half, exclude_half)
+                             search_widest, sidelobe_half, exclude_half)
         # every sidelobe square lies in one block, centre +/- (search_half +
         # sidelobe_half): copy that block once, then read each plane's square from a
         # strided view of it
@@ -181,11 +182,8 @@ def peak_psr(planes: np.ndarray, centre_yx: tuple[int, int] | np.ndarray,
         block = planes.reshape(count, -1).take(layout.block_indices, axis=1).reshape(
             count, block_side, block_side)
         rows = cols = None
-        search_widest = int(searches[0])
     else:
-        # per-plane centres or search sizes: each plane's block around its own centre,
-        # as wide as the widest search needs
-        search_widest = int(searches.max())
+        # per-plane centres: each plane's block around its own centre
         offsets = np.arange(-(search_widest + sidelobe_half), search_widest + sidelobe_half + 1)
         centres = np.broadcast_to(centres, (count, 2))
         rows = (centres[:, :1] + offsets) % ny
