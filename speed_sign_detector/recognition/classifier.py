@@ -38,7 +38,7 @@ import numpy as np
 from speed_sign_detector.config import ClassifierConfig
 from speed_sign_detector.detection.candidates import Candidate
 from speed_sign_detector.errors import BankFileError, ClassifierInputError
-from speed_sign_detector.recognition.candidate_evidence import (  # noqa: F401 (re-exported)
+from speed_sign_detector.recognition.candidate_evidence import (
     CorrelationEvidence,
     EvidenceSearch,
     NoSignFound,
