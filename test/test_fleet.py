@@ -268,13 +268,22 @@ def test_worker_without_restarts_left_fails_its_bag_and_the_run_goes_on(
     assert not FleetFolder(tmp_path / 'out').summary_path(jobs[0].key).exists()
 
 
+def _default_interrupt_handling() -> None:
+    """In the child before it starts: SIGINT as a terminal's Ctrl-C finds it. A test run
+    started in the background of a shell without job control inherits SIGINT ignored,
+    and Python then leaves it ignored (as every program should in a background job)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
 def test_interrupted_run_resumes_where_it_stopped(
         ray_cluster: Any, drives: dict[str, Any], bank_config: Path, tmp_path: Path) -> None:
     """Ctrl-C to a real ``speed_sign_eval fleet`` process that joined this module's Ray
     with --address; the same command again skips the bags it had done."""
     out = tmp_path / 'out'
-    bags = [str(drives['bags'][name]) for name in ('d2_mcap_raw', 'd6_sqlite3_jpeg',
-                                                    'd6_ros1_raw')]
+    # the long drive in the middle: Ctrl-C lands while it runs, not after the last bag
+    bags = [str(drives['bags']['d2_mcap_raw']), str(drives['long_bag']),
+            str(drives['bags']['d6_ros1_raw'])]
     arguments = ['fleet', *bags, '--out', str(out), '--workers', '1', '--json',
                  '--config', str(bank_config)]
     executable = Path(sys.executable).parent / 'speed_sign_eval'
@@ -282,7 +291,8 @@ def test_interrupted_run_resumes_where_it_stopped(
     summaries = out / 'summaries'
     with open(tmp_path / 'stdout', 'w') as stdout, open(tmp_path / 'stderr', 'w') as stderr:
         process = subprocess.Popen([str(executable), *arguments, '--address', address],
-                                   stdout=stdout, stderr=stderr)
+                                   stdout=stdout, stderr=stderr,
+                                   preexec_fn=_default_interrupt_handling)
         try:
             deadline = time.monotonic() + 300   # a guard against hanging, not a threshold
             while not (summaries.is_dir() and any(summaries.iterdir())):
@@ -294,7 +304,7 @@ def test_interrupted_run_resumes_where_it_stopped(
         finally:
             if process.poll() is None:
                 process.kill()
-    assert status == 130, (tmp_path / 'stderr').read_text()
+    assert status == 130, (tmp_path / 'stderr').read_text() + (tmp_path / 'stdout').read_text()
     first = last_json((tmp_path / 'stdout').read_text())
     assert first['interrupted'] is True and first['bags'] == 3
     assert 1 <= first['bags_done'] < 3 and first['bags_done'] + first['bags_not_run'] == 3
