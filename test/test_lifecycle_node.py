@@ -148,3 +148,36 @@ def test_a_configure_that_cannot_build_the_pipeline_fails_with_the_reason(
     assert status == 0, output
     assert 'configure failed' in output and 'OpenGL' in output, output
     assert 'Traceback' not in output, output
+
+
+def test_a_parameter_set_while_unconfigured_is_built_in_not_applied_again(
+        request: pytest.FixtureRequest) -> None:
+    """The pipeline that configure builds already has the change: the worker does not
+    apply it a second time (which logged a spurious "parameters applied"); a change while
+    configured is applied."""
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=DOMAIN_ID + 2)
+    bank_cache = request.config.cache.mkdir('speed_sign_classifier_banks')
+    node = ManagedSpeedSignDetectorNode(context=context, parameter_overrides=[
+        Parameter('classifier.cache_dir', value=str(bank_cache))])
+    client = LifecycleClient(context=context)
+    applied: list[float] = []
+    apply = node._reconfigure
+
+    def counting_apply(pipeline: object, config: object) -> None:
+        applied.append(config.classifier.psr_threshold)   # type: ignore[attr-defined]
+        apply(pipeline, config)
+
+    node._reconfigure = counting_apply   # type: ignore[method-assign]
+    with spinning(context, node, client):
+        result = node.set_parameters([Parameter('classifier.psr_threshold', value=7.5)])
+        assert result[0].successful
+        assert client.transition(Transition.TRANSITION_CONFIGURE)
+        assert node.pipeline_running
+        time.sleep(1.0)                     # time for a second application, if any
+        assert applied == []
+        assert node._pipeline_config.classifier.psr_threshold == 7.5
+        assert node.set_parameters([Parameter('classifier.psr_threshold', value=9.0)])[0] \
+            .successful
+        wait_for(lambda: applied == [9.0], 'the change applied while configured')
+        assert client.transition(Transition.TRANSITION_INACTIVE_SHUTDOWN)

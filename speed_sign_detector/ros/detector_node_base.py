@@ -167,6 +167,10 @@ class DetectorNodeBase:
             return
         self._stopping = False
         self._worker_error = None
+        with self._condition:
+            # the new pipeline is built from _pipeline_config, which holds every change
+            # accepted so far: none is left to apply to it
+            self._pending_config = None
         ready = threading.Event()
         self._worker = threading.Thread(target=self._run_worker, args=(ready,),
                                         name='speed_sign_pipeline', daemon=True)
