@@ -98,6 +98,7 @@ def test_monitor_keeps_topics_apart_and_reports_the_last_interval() -> None:
     assert recent.frames_lost == 10
     assert recent.lost_share == pytest.approx(10 / 40)
     assert monitor.totals().frames_lost == 10
+    assert monitor.since_last_call(monitor.totals()).frames_lost == 0   # nothing new
     monitor.add('/camera/image_raw', 0)  # unstamped frames are ignored
     assert monitor.totals().frames_received == 40 + 20 + 30
 

@@ -184,7 +184,6 @@ class DetectorNodeBase:
             if isinstance(error, SpeedSignError):
                 raise error
             raise SpeedSignError(f'cannot build the pipeline: {error}') from error
-        self._started_monotonic_s = time.monotonic()
 
     def stop_pipeline(self) -> None:
         """Stop the worker and recognition threads (the worker closes the pipeline and
@@ -353,7 +352,7 @@ class DetectorNodeBase:
             dropped_stale, rejected, last_error = (stats.dropped_stale, stats.rejected,
                                                    stats.last_error)
             transport_total = stats.transport_loss.totals()
-            transport_recent = stats.transport_loss.since_last_call()
+            transport_recent = stats.transport_loss.since_last_call(transport_total)
             middleware_lost = sum(stats.lost_reported_by_middleware.values())
             stamp_p50, stamp_p95 = percentiles_ms(stats.stamp_latency_ms)
             proc_p50, proc_p95 = percentiles_ms(stats.processing_latency_ms)

@@ -258,9 +258,15 @@ class TransportLossMonitor:
         return {topic: estimator.report().frames_lost
                 for topic, estimator in self._estimators.items()}
 
-    def since_last_call(self) -> TransportLossReport:
-        """Totals minus those at the previous call: the loss over the last interval."""
-        totals = self.totals()
+    def since_last_call(self, totals: TransportLossReport | None = None
+                        ) -> TransportLossReport:
+        """Totals minus those at the previous call: the loss over the last interval.
+
+        Args:
+            totals: :meth:`totals` just taken, when the caller has them (saves computing
+                them again).
+        """
+        totals = totals if totals is not None else self.totals()
         received, lost = self._reported
         self._reported = (totals.frames_received, totals.frames_lost)
         return TransportLossReport(totals.frames_received - received,
