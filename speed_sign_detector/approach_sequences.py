@@ -393,9 +393,12 @@ class ApproachStream:
         config = self.config
         index = 0
         next_track_id = 1
-        for sequence in self.sequences:
-            scene = cv2.imread(str(self.scenes_dir / 'images' / sequence.scene_file),
-                               cv2.IMREAD_COLOR)
+        decoded: tuple[str, np.ndarray | None] | None = None   # the sequences of a scene
+        for sequence in self.sequences:                          # follow one another
+            if decoded is None or decoded[0] != sequence.scene_file:
+                decoded = (sequence.scene_file, cv2.imread(
+                    str(self.scenes_dir / 'images' / sequence.scene_file), cv2.IMREAD_COLOR))
+            scene = decoded[1]
             if scene is None:
                 LOGGER.warning('scene %s cannot be read: its sequence is skipped',
                                sequence.scene_file)
