@@ -71,6 +71,9 @@ DEFAULT_RETRIES = 2
 LOCAL_OBJECT_STORE_BYTES = 256 * 1024 * 1024
 #: How often the driver asks the busy workers how far they are, seconds.
 PROGRESS_POLL_S = 0.5
+#: After Ctrl-C, how long the driver waits for the results of bags its workers have
+#: already finished (their outputs are on disk), seconds.
+INTERRUPT_COLLECT_S = 1.0
 
 ProgressHook = Callable[[BagJob, 'WorkerProgress', Any], None]
 """``on_progress(job, progress, actor)``: a busy worker's answer about the bag it evaluates
@@ -257,6 +260,7 @@ class _Dispatcher:
                             idle.append(self._new_actor(gpus))
             return False
         except KeyboardInterrupt:
+            self._collect_finished(running, outcomes)
             print('speed_sign_eval fleet: interrupted; the bags done so far are kept, run '
                   'the same command again to go on', file=sys.stderr)
             return True
@@ -266,6 +270,25 @@ class _Dispatcher:
                     ray.kill(actor)
                 except Exception:  # noqa: BLE001 - already gone
                     pass
+
+    def _collect_finished(self, running: dict[Any, tuple[BagJob, Any, float]],
+                          outcomes: dict[str, BagOutcome]) -> None:
+        """After Ctrl-C: the outcomes of the bags that finished as it came (a worker
+        writes a bag's outputs before the driver hears of it), waiting at most
+        :data:`INTERRUPT_COLLECT_S`; the bags still running are left."""
+        if not running:
+            return
+        try:
+            ready, _ = self.ray.wait(list(running), num_returns=len(running),
+                                     timeout=INTERRUPT_COLLECT_S)
+            for ref in ready:
+                job, _, submitted = running.pop(ref)
+                outcome, _ = self._result(ref, job, submitted)
+                if outcome.done:
+                    outcomes[job.key] = outcome
+                    self._finished(outcome)
+        except KeyboardInterrupt:   # Ctrl-C again: stop at once
+            pass
 
     def _worker_count(self, bags: int) -> int:
         if self.options.workers is not None:
