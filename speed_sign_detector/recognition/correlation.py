@@ -174,7 +174,7 @@ def peak_psr(planes: np.ndarray, centre_yx: tuple[int, int] | np.ndarray,
     search_widest = int(searches.max())
     if len(centres) == 1:
         layout = _psr_layout((int(centres[0, 0]), int(centres[0, 1])), (ny, nx),
-                             search_widest, sidelobe_half, exclude_half)
+                             search_widest, sidelobe_half)
         # every sidelobe square lies in one block, centre +/- (search_half +
         # sidelobe_half): copy that block once, then read each plane's square from a
         # strided view of it
@@ -240,7 +240,8 @@ def _sidelobe_weights(sidelobe_half: int, exclude_half: int) -> tuple[np.ndarray
 
 @dataclass(frozen=True)
 class _PsrLayout:
-    """Index arrays of :func:`peak_psr` for one plane shape, centre and set of half sizes (read-only, cached by :func:`_psr_layout`).
+    """Index arrays of :func:`peak_psr` for one plane shape, centre and set of half sizes
+    (read-only, cached by :func:`_psr_layout`).
 
     Attributes:
         block_side: side of the block that holds every sidelobe square,
@@ -259,7 +260,7 @@ class _PsrLayout:
 
 @functools.lru_cache(maxsize=256)  # ~65 layouts (~3 MB) on GTSRB crops and frames
 def _psr_layout(centre_yx: tuple[int, int], shape: tuple[int, int], search_half: int,
-                sidelobe_half: int, exclude_half: int) -> _PsrLayout:
+                sidelobe_half: int) -> _PsrLayout:
     """The :class:`_PsrLayout` of planes of ``shape`` (Ny, Nx) around ``centre_yx``."""
     reach = search_half + sidelobe_half
     rows = (centre_yx[0] + np.arange(-reach, reach + 1)) % shape[0]
