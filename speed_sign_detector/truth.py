@@ -48,6 +48,11 @@ TRUTH_COLUMNS: tuple[str, ...] = ('stamp_s', 'frame', 'track_id', 'kind', 'limit
 END_OF_LIMIT_KIND_PREFIX = 'end_of_limit'
 
 
+def is_end_of_limit_kind(kind: str) -> bool:
+    """True when a truth ``kind`` names an end-of-limit sign."""
+    return kind.startswith(END_OF_LIMIT_KIND_PREFIX)
+
+
 @dataclass(frozen=True)
 class TruthRow:
     """One sign seen in one frame.
@@ -109,7 +114,7 @@ class TruthTrack:
     @property
     def is_end_of_limit(self) -> bool:
         """True for an end-of-limit sign."""
-        return self.kind.startswith(END_OF_LIMIT_KIND_PREFIX)
+        return is_end_of_limit_kind(self.kind)
 
     @property
     def max_radius_px(self) -> float:

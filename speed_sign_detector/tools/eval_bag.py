@@ -103,9 +103,9 @@ from speed_sign_detector.tools.run_control import (
     stop_on_interrupt,
 )
 from speed_sign_detector.truth import (
-    END_OF_LIMIT_KIND_PREFIX,
     TruthTrack,
     group_tracks,
+    is_end_of_limit_kind,
     read_truth,
 )
 
@@ -330,7 +330,7 @@ def score_drive(tracks: Sequence[TruthTrack], events: Sequence[LimitEvent],
     limit_outcomes = [outcome for outcome in outcomes.values()
                       if outcome.limit_kmh > 0 and not outcome.cut]
     end_outcomes = [outcome for outcome in outcomes.values()
-                    if outcome.kind.startswith(END_OF_LIMIT_KIND_PREFIX) and not outcome.cut]
+                    if is_end_of_limit_kind(outcome.kind) and not outcome.cut]
     recognized = sum(outcome.recognized for outcome in limit_outcomes)
     wrong = lookalike + misread + phantom
     drive_time_s = last_stamp - first_stamp + period_s if stamps.size else 0.0
@@ -589,7 +589,7 @@ def format_report(summary: dict[str, Any]) -> str:
                 result = 'cut'
             elif row['limit_kmh'] > 0:
                 result = 'recognized' if row['recognized'] else 'MISSED'
-            elif row['kind'].startswith(END_OF_LIMIT_KIND_PREFIX):
+            elif is_end_of_limit_kind(row['kind']):
                 result = 'end read' if row['recognized'] else 'end missed'
             else:
                 result = 'look-alike'
