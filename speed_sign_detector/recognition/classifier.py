@@ -275,10 +275,8 @@ class Classifier:
         for (x_px, y_px, radius_px), evidence in zip(
                 positions, self._evidence.evidence(gray, positions), strict=True):
             if isinstance(evidence, NoSignFound):
-                if not (math.isfinite(x_px) and math.isfinite(y_px)
-                        and math.isfinite(radius_px)):
-                    x_px, y_px, radius_px = float(x_px), float(y_px), float(radius_px)
-                evidence = self._no_sign(x_px, y_px, radius_px, evidence.detection_psr)
+                evidence = self._no_sign(float(x_px), float(y_px), float(radius_px),
+                                         evidence.detection_psr)
             found.append(evidence)
         return found
 

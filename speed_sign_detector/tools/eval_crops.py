@@ -46,7 +46,7 @@ import numpy as np
 from speed_sign_detector.config import ClassifierConfig, load_yaml
 from speed_sign_detector.errors import TrainingDataError, TruthFileError
 from speed_sign_detector.recognition.classifier import Classification, Classifier
-from speed_sign_detector.recognition.labelled_crops import (  # noqa: F401 (re-exported)
+from speed_sign_detector.recognition.labelled_crops import (
     GTSRB_END_OF_80,
     GTSRB_LIMITS_KMH,
     GTSRB_LOOKALIKE_NAMES,
