@@ -18,6 +18,7 @@ import pytest
 from scene_helpers import textured_background
 
 from speed_sign_detector.config import ClassifierConfig
+from speed_sign_detector.detection.candidates import Candidate
 from speed_sign_detector.errors import BankFileError, TrainingDataError
 from speed_sign_detector.recognition.bank_file import load_bank_file, save_bank_file
 from speed_sign_detector.recognition.classifier import (
@@ -208,6 +209,24 @@ def test_tight_and_margin_crops(trained: TrainedBank, framing: str) -> None:
     assert crop_sign_radius((48, 48), 'margin') == 19.0
     with pytest.raises(ValueError, match='unknown crop framing'):
         classifier.classify_crop(tight_crop, 'loose')
+
+
+@pytest.mark.parametrize('kind', ['30', '80', '120'])
+def test_box_inside_the_sign_edge_is_read_as_a_crop_but_not_as_a_frame(kind: str) -> None:
+    # annotation boxes often sit a pixel or two inside the ring (GTSRB ROIs do): the crop
+    # border is the sign's box, not a frame border cutting the sign off
+    margin_crop = crop_of(kind, 36, 6, seed=5)
+    box = np.ascontiguousarray(margin_crop[8:-8, 8:-8])  # 2 px inside the sign's edge
+    classifier = Classifier(SMALL)
+    for framing in ('tight', 'auto'):
+        assert classifier.classify_crop(box, framing).label == kind, framing
+    # the same pixels as a camera frame: the sign reaches beyond the border, and the
+    # frame rule (max_cut_fraction) withholds it
+    centre = box.shape[1] / 2.0
+    radius = crop_sign_radius(box.shape, 'tight') / SMALL.candidate_radius_scale
+    (in_frame,) = classifier.classify(box, [Candidate(centre, centre, radius, 1.0)])
+    assert in_frame.label == 'no_sign'
+    assert in_frame.radius_px > 18.0  # measured beyond the border
 
 
 def test_folds_never_split_a_track(crop_folder: Path) -> None:

@@ -213,33 +213,34 @@ class Classifier:
                 unknown framing.
         """
         crop = _check_gray(crop, 'crop')
-        return self.decide(crop, self.crop_evidence(crop, framing))
+        return self.decide(crop, self.crop_evidence(crop, framing), crop=True)
 
     def crop_evidence(self, crop: np.ndarray, framing: str | None = None
                       ) -> CorrelationEvidence | Classification:
         """:meth:`evidence_at` for a crop framed as :meth:`classify_crop` takes it; for
-        ``'auto'`` framing both framings are tried and the one whose detection filter
-        finds the sign more clearly (higher PSR) wins."""
+        ``'auto'`` framing both framings are tried and the one whose best classification
+        filter matches more clearly (higher PSR) wins. (The detection filters' PSR is a
+        worse judge: a filter larger than the sign of a margin crop often finds its ring
+        more clearly, and the classification at that size suffers.)"""
         crop = _check_gray(crop, 'crop')
         height, width = crop.shape
         framing = framing or self.config.crop_framing
         framings = ('margin', 'tight') if framing == 'auto' else (framing,)
-        best: CorrelationEvidence | Classification | None = None
-        for found in self.evidence_for_candidates(
-                crop, [(width / 2.0, height / 2.0, crop_sign_radius(crop.shape, name))
-                       for name in framings]):
-            if best is None or _detection_psr(found) > _detection_psr(best):
-                best = found
-        assert best is not None
-        return best
+        found = self.evidence_for_candidates(
+            crop, [(width / 2.0, height / 2.0, crop_sign_radius(crop.shape, name))
+                   for name in framings])
+        return max(found, key=_classification_psr)  # the first of equals wins
 
     def decide(self, gray: np.ndarray, evidence: CorrelationEvidence | Classification,
-               use_second_opinion: bool = True) -> Classification:
+               use_second_opinion: bool = True, crop: bool = False) -> Classification:
         """The answer for :meth:`evidence_at`'s result (as :meth:`classify` gives it);
-        ``use_second_opinion=False`` decides by the correlation filters alone."""
+        ``use_second_opinion=False`` decides by the correlation filters alone.
+        ``crop=True``: ``gray`` is a crop framing one sign (:meth:`crop_evidence`'s
+        input), whose border is the sign's box and not a frame border that cuts signs
+        off: a sign reaching it (as in a tight crop) is read."""
         if isinstance(evidence, Classification):
             return evidence
-        return self._decide(gray, evidence, use_second_opinion)
+        return self._decide(gray, evidence, use_second_opinion, crop=crop)
 
     # -- internals ---------------------------------------------------------------------
 
@@ -280,29 +281,33 @@ class Classifier:
             found.append(evidence)
         return found
 
-    def _withheld_by_filters(self, shape: tuple[int, ...], evidence: CorrelationEvidence,
-                             opinion: SecondOpinion | None) -> bool:
+    def _withheld_by_filters(self, shape: tuple[int, ...] | None,
+                             evidence: CorrelationEvidence, opinion: SecondOpinion | None
+                             ) -> bool:
         """True when the correlation evidence alone withholds the answer (before any
         second opinion): its PSR is too small, or the sign is cut by the border of the
-        (H, W) ``shape`` frame."""
+        (H, W) ``shape`` frame (``None``: a crop, whose border cuts no sign)."""
         config = self.config
+        top_psr = evidence.ranked[0][1]
+        if top_psr < (config.psr_threshold if opinion is None
+                      else config.second_opinion_psr_threshold):
+            return True
+        if shape is None:
+            return False
         frame_x, frame_y, size_radius = evidence.x_px, evidence.y_px, evidence.radius_px
         height, width = shape
         cut_px = max(-frame_x, -frame_y, frame_x - (width - 1),
                      frame_y - (height - 1)) + size_radius
-        top_psr = evidence.ranked[0][1]
-        return (top_psr < (config.psr_threshold if opinion is None
-                           else config.second_opinion_psr_threshold)
-                or cut_px > config.max_cut_fraction * size_radius)
+        return cut_px > config.max_cut_fraction * size_radius
 
     def _decide(self, gray: np.ndarray, evidence: CorrelationEvidence,
-                use_second_opinion: bool = True, features: np.ndarray | None = None
-                ) -> Classification:
+                use_second_opinion: bool = True, features: np.ndarray | None = None,
+                crop: bool = False) -> Classification:
         """The answer from the correlation evidence: the leading class (or the second
         opinion's choice among the leading classes), or "no sign" when the PSR or the lead
         is too small, the second opinion withholds it, or the sign is cut by the frame
-        border. ``features``: the sign's (FEATURE_SIZE,) second-opinion features when
-        already computed."""
+        border (not for a ``crop``). ``features``: the sign's (FEATURE_SIZE,)
+        second-opinion features when already computed."""
         config = self.config
         labels = [_label_of(name) for name, _ in evidence.ranked]
         label = labels[0]
@@ -310,7 +315,7 @@ class Classifier:
         roll = evidence.rotation_deg
         opinion = self.trained_bank.second_opinion if use_second_opinion else None
         top_psr = evidence.ranked[0][1]
-        withhold = self._withheld_by_filters(gray.shape, evidence, opinion)
+        withhold = self._withheld_by_filters(None if crop else gray.shape, evidence, opinion)
         if opinion is not None and not withhold:
             if features is None:
                 features = sign_features(aligned_patches(
@@ -338,8 +343,9 @@ class Classifier:
                               size_radius, roll, margin, frame_x, frame_y)
 
 
-def _detection_psr(found: CorrelationEvidence | Classification) -> float:
-    return found.detection_psr if isinstance(found, CorrelationEvidence) else found.psr
+def _classification_psr(found: CorrelationEvidence | Classification) -> float:
+    """The leading classification PSR of evidence; -inf where no sign was found."""
+    return found.ranked[0][1] if isinstance(found, CorrelationEvidence) else -math.inf
 
 
 #: Crop framings :meth:`Classifier.classify_crop` accepts.
