@@ -161,3 +161,36 @@ def test_short_run_on_real_crops(shared_data_dir: Path, tmp_path: Path,
     assert report['crops'] == 0 and report['accuracy'] is None
     assert set(report['per_lookalike_count']) <= set(GTSRB_LOOKALIKE_NAMES.values())
     assert report['read_as_limit_rate'] < 0.2
+
+
+def test_tight_real_crops_read_as_well_as_margin_ones(shared_data_dir: Path, tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]
+                                                      ) -> None:
+    # the same real GTSRB signs, cut to their ROI boxes (as most labelling tools cut
+    # crops), read with the default framing (auto) as well as with GTSRB's margin
+    folder = shared_data_dir / 'gtsrb-dev'
+    labels, _ = read_labels(folder)
+    tight = tmp_path / 'tight'
+    lines = ['Filename;Width;Height;Roi.X1;Roi.Y1;Roi.X2;Roi.Y2;ClassId']
+    for label in labels[::55]:
+        image = cv2.imread(str(label.path))
+        box = image[label.roi_y1:label.roi_y2 + 1, label.roi_x1:label.roi_x2 + 1]
+        name = label.path.relative_to(folder).as_posix()
+        (tight / name).parent.mkdir(parents=True, exist_ok=True)
+        cv2.imwrite(str(tight / name), box)
+        height, width = box.shape[:2]
+        lines.append(f'{name};{width};{height};0;0;{width - 1};{height - 1};{label.class_id}')
+    (tight / 'labels.csv').write_text('\n'.join(lines) + '\n')
+    config = tmp_path / 'params.yaml'
+    config.write_text(CONFIG_YAML.format(cache=tmp_path / 'cache').replace(
+        'max_radius_px: 24.0', 'max_radius_px: 48.0'))
+    reports = {}
+    for name, data in (('margin', folder), ('tight', tight)):
+        status = eval_main(['crops', str(data), '--json', '--config', str(config)]
+                           + (['--every', '55'] if name == 'margin' else []))
+        assert status == 0
+        reports[name] = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert reports['tight']['crops'] == reports['margin']['crops'] == len(labels[::55])
+    assert reports['tight']['accuracy'] > 0.7
+    assert reports['tight']['accuracy'] >= reports['margin']['accuracy'] - 0.05
+    assert reports['tight']['wrong_limit_rate'] < 0.1

@@ -3,7 +3,8 @@
 ``DIR/labels.csv`` (``;``-separated, header
 ``Filename;Width;Height;Roi.X1;Roi.Y1;Roi.X2;Roi.Y2;ClassId``) lists the crops, with
 GTSRB class ids. Each crop is read as grayscale and given to
-:meth:`Classifier.classify_crop`. Two groups of classes are evaluated:
+:meth:`Classifier.classify_crop`, framed as ``classifier.crop_framing`` says (``auto``:
+a GTSRB margin or a tight box, either). Two groups of classes are evaluated:
 
 - the limit classes 0=20, 1=30, 2=50, 3=60, 4=70, 5=80, 7=100, 8=120 km/h, and 6 = end
   of 80: an answer is right when it is the true limit, or, for class 6, any answer that
@@ -361,7 +362,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description='Classify every crop listed in DIR/labels.csv (GTSRB format: '
         f'{LABELS_HEADER}). Limit classes 0-8: accuracy and wrong-limit rate, overall and '
         'per class. Round look-alikes (classes 9, 10, 15, 16, 17, 32-42): the share read '
-        'as a speed limit. Unreadable crop files are skipped, listed, and make the exit '
+        'as a speed limit. Crops may frame the sign with a margin (as GTSRB does) or '
+        'tightly (the box is the sign): classifier.crop_framing (auto by default) says '
+        'which. Unreadable crop files are skipped, listed, and make the exit '
         'status 1; Ctrl-C reports the crops done, marked partial (exit status 130).')
     parser.add_argument('folder', metavar='DIR', help='folder holding labels.csv and the crops')
     parser.add_argument('--config', help='ROS 2 parameter YAML file of the node (its '
