@@ -198,6 +198,26 @@ class ClassifierConfig:
                                             'radius (GTSDB, median).', low=0.2, high=5.0)
     size_search_ratio: float = setting(1.3, 'Detection filters searched: radii within this '
                                        'factor of the candidate radius.', low=1.0, high=4.0)
+    larger_size_retry_factor: float = setting(
+        1.7, 'A candidate of at least larger_size_retry_min_radius_px answered "no sign" is '
+        'classified again at this factor times its radius: on large signs the '
+        'radial-symmetry detector often reports the inner ring\'s or the digits\' radius, '
+        'about half the outer one (1 = no retry).', low=1.0, high=4.0)
+    larger_size_retry_min_radius_px: float = setting(
+        9.0, 'Least candidate radius (detector pixels) for the larger-size retry.',
+        low=0.0, high=1000.0)
+    larger_size_retry_max_candidates: int = setting(
+        2, 'At most this many candidates of a frame are retried at the larger size, the '
+        'largest first (a bound on its time: clutter gives 2-4 per frame).', low=0, high=100)
+    larger_size_retry_min_detection_psr: float = setting(
+        6.0, 'Least PSR of the best detection filter at the larger size for the retry to '
+        'run the classification filters (on gtsdb-dev the retried signs read there scored '
+        '6.7-10, clutter mostly 4-5.6: the retry then costs little more than the detection '
+        'filters).', low=0.0, high=1000.0)
+    larger_size_retry_min_psr: float = setting(
+        12.0, 'Least PSR of an answer of the larger-size retry: a second look at another '
+        'size needs clearer evidence (large round clutter matched a limit at PSR 9-11).',
+        low=0.0, high=1000.0)
     position_search: float = setting(0.35, 'Peak search half-width around the candidate '
                                      'centre, as a fraction of its radius.', low=0.0,
                                      high=2.0)

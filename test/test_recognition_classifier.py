@@ -139,6 +139,33 @@ def test_small_and_large_signs_are_rescaled(classifier: Classifier) -> None:
     assert result.radius_px == pytest.approx(40.0, rel=0.2)
 
 
+
+@pytest.mark.parametrize('kind', ['30', '50', '80'])
+@pytest.mark.parametrize(('radius_px', 'candidate_radius_px'), [(30.0, 14.0), (24.0, 11.0)])
+def test_large_sign_found_by_its_inner_ring_is_read_at_a_larger_size(
+        classifier: Classifier, kind: str, radius_px: float, candidate_radius_px: float
+) -> None:
+    # the radial-symmetry detector often gives a large sign the radius of its inner ring
+    # or digits, about half the outer one: beyond the size search, so "no sign" at first
+    frame = make_scene(kind, radius_px, seed=12, shape=(200, 240), centre=(120.0, 100.0))
+    candidate = Candidate(120.0, 100.0, candidate_radius_px, 1.0)
+    without_retry = Classifier(dataclasses.replace(classifier.config,
+                                                   larger_size_retry_factor=1.0))
+    assert without_retry.classify(frame, [candidate])[0].label == 'no_sign'
+    (answer,) = classifier.classify(frame, [candidate])
+    assert answer.label == kind
+    assert answer.radius_px == pytest.approx(radius_px, rel=0.1)
+    # below the least radius of the retry, or no retries allowed: not tried again; a
+    # retried answer below the retry's least PSR, or a detection below its least
+    # detection PSR: withheld
+    for setting in ({'larger_size_retry_min_radius_px': candidate_radius_px + 1.0},
+                    {'larger_size_retry_max_candidates': 0},
+                    {'larger_size_retry_min_psr': answer.psr + 0.1},
+                    {'larger_size_retry_min_detection_psr': 1000.0}):
+        config = dataclasses.replace(classifier.config, **setting)
+        assert Classifier(config).classify(frame, [candidate])[0].label == 'no_sign', setting
+
+
 @pytest.mark.parametrize('kind', ['no_overtaking', 'no_entry', 'weight_limit', 'width_limit',
                                   'height_limit', 'end_of_limit_80', 'end_of_limit_60',
                                   'end_of_restrictions'])

@@ -121,7 +121,8 @@ class EvidenceSearch:
         self._clahe = (cv2.createCLAHE(clipLimit=config.clahe_clip_limit, tileGridSize=tiles)
                        if config.clahe_clip_limit > 0 else None)
 
-    def evidence(self, gray: np.ndarray, positions: Sequence[tuple[float, float, float]]
+    def evidence(self, gray: np.ndarray, positions: Sequence[tuple[float, float, float]],
+                 detection_psr_threshold: float | None = None
                  ) -> list[CorrelationEvidence | NoSignFound]:
         """Correlate the signs near each position with every class.
 
@@ -129,6 +130,8 @@ class EvidenceSearch:
             gray: (H, W) uint8 image.
             positions: (x, y, radius) of each expected sign: centre and radius in image
                 pixels.
+            detection_psr_threshold: least detection PSR for the classification filters
+                to run (default and at least: ``config.detection_psr_threshold``).
 
         Returns:
             Per position, in order: the ranked class scores with the sign's measured
@@ -138,8 +141,8 @@ class EvidenceSearch:
                     for x_px, y_px, radius_px in positions]
         searched = [p for p in prepared if isinstance(p, _Position)]
         self._detect(searched)
-        located = [p for p in searched
-                   if p.detection_psr >= self.config.detection_psr_threshold]
+        threshold = max(self.config.detection_psr_threshold, detection_psr_threshold or 0.0)
+        located = [p for p in searched if p.detection_psr >= threshold]
         self._classify(located)
         return [p if isinstance(p, NoSignFound) else self._result(p) for p in prepared]
 

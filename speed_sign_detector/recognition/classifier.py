@@ -168,7 +168,13 @@ class Classifier:
             candidates: candidate centres and radii in frame pixels.
 
         Returns:
-            One :class:`Classification` per candidate, in the same order.
+            One :class:`Classification` per candidate, in the same order. A candidate of
+            at least ``larger_size_retry_min_radius_px`` answered "no sign" (at most
+            ``larger_size_retry_max_candidates`` of them, the largest) is classified
+            again at ``larger_size_retry_factor`` times its radius (classification
+            filters only where a detection filter finds a sign there with a PSR of at
+            least ``larger_size_retry_min_detection_psr``); that answer stands where it
+            names a sign with a PSR of at least ``larger_size_retry_min_psr``.
 
         Raises:
             ClassifierInputError: (a ``ValueError``) for a frame that is not a non-empty
@@ -176,8 +182,34 @@ class Classifier:
         """
         gray = _check_gray(gray, 'gray')
         scale = self.config.candidate_radius_scale
-        found = self.evidence_for_candidates(
-            gray, [(c.x_px, c.y_px, c.radius_px * scale) for c in candidates])
+        answers = list(self._classify_at(
+            gray, [(c.x_px, c.y_px, c.radius_px * scale) for c in candidates]))
+        # large signs whose candidate radius is the inner ring's or the digits': once
+        # more at a larger size where the first answer was "no sign"
+        factor = self.config.larger_size_retry_factor
+        retried = [index for index, (candidate, answer) in enumerate(zip(candidates, answers))
+                   if factor > 1.0 and answer.label == LABEL_NO_SIGN
+                   and candidate.radius_px >= self.config.larger_size_retry_min_radius_px]
+        retried = sorted(sorted(retried, key=lambda i: -candidates[i].radius_px)
+                         [:self.config.larger_size_retry_max_candidates])
+        if retried:
+            second = self._classify_at(gray, [
+                (candidates[i].x_px, candidates[i].y_px,
+                 candidates[i].radius_px * scale * factor) for i in retried],
+                self.config.larger_size_retry_min_detection_psr)
+            for index, answer in zip(retried, second):
+                if (answer.label != LABEL_NO_SIGN
+                        and answer.psr >= self.config.larger_size_retry_min_psr):
+                    answers[index] = answer
+        return tuple(answers)
+
+    def _classify_at(self, gray: np.ndarray, positions: Sequence[tuple[float, float, float]],
+                     detection_psr_threshold: float | None = None
+                     ) -> tuple[Classification, ...]:
+        """:meth:`classify` of signs at (x, y, radius) positions of a checked frame (the
+        radius as the size search takes it), without the larger-size retry; see
+        :meth:`evidence_for_candidates` for ``detection_psr_threshold``."""
+        found = self.evidence_for_candidates(gray, positions, detection_psr_threshold)
         # the second opinion's features of every sign it will be asked about, in one call
         opinion = self.trained_bank.second_opinion
         asked = [index for index, evidence in enumerate(found)
@@ -260,7 +292,8 @@ class Classifier:
         return self.evidence_for_candidates(gray, [(x_px, y_px, radius_px)])[0]
 
     def evidence_for_candidates(self, gray: np.ndarray,
-                                positions: Sequence[tuple[float, float, float]]
+                                positions: Sequence[tuple[float, float, float]],
+                                detection_psr_threshold: float | None = None
                                 ) -> list[CorrelationEvidence | Classification]:
         """:meth:`evidence_at` for several signs of one image, correlated together (the
         same answers, faster).
@@ -268,13 +301,17 @@ class Classifier:
         Args:
             gray: (H, W) uint8 image.
             positions: (x, y, radius) of each sign, pixels.
+            detection_psr_threshold: least PSR of the best detection filter for the
+                classification filters to run, "no sign" below (default and at least
+                ``config.detection_psr_threshold``).
 
         Returns:
             One result per position, in order.
         """
         found: list[CorrelationEvidence | Classification] = []
         for (x_px, y_px, radius_px), evidence in zip(
-                positions, self._evidence.evidence(gray, positions), strict=True):
+                positions, self._evidence.evidence(gray, positions, detection_psr_threshold),
+                strict=True):
             if isinstance(evidence, NoSignFound):
                 evidence = self._no_sign(float(x_px), float(y_px), float(radius_px),
                                          evidence.detection_psr)
