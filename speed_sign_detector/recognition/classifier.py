@@ -233,8 +233,9 @@ class Classifier:
             framing: how the crop frames the sign (default ``config.crop_framing``):
                 ``'margin'`` as GTSRB crops do (a margin of 10% of the sign's size but at
                 least 5 pixels on each side), ``'tight'`` (the box is the sign), or
-                ``'auto'`` (either: the size search spans both). The detection filters
-                then find the exact size and position.
+                ``'auto'`` (either: both are tried, and the one whose best classification
+                filter matches more clearly wins). The detection filters then find the
+                exact size and position.
 
         Returns:
             The classification; ``x_px``/``y_px`` are crop pixels. A crop too small for
