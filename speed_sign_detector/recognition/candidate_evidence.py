@@ -144,7 +144,8 @@ class EvidenceSearch:
         threshold = max(self.config.detection_psr_threshold, detection_psr_threshold or 0.0)
         located = [p for p in searched if p.detection_psr >= threshold]
         self._classify(located)
-        return [p if isinstance(p, NoSignFound) else self._result(p) for p in prepared]
+        return [p if isinstance(p, NoSignFound) else self._result(p, threshold)
+                for p in prepared]
 
     # -- steps ------------------------------------------------------------------------
 
@@ -324,10 +325,12 @@ class EvidenceSearch:
         for position, spectrum, (top, left) in zip(missing, spectra, corners):
             position.spectra[index] = (spectrum, top, left)
 
-    def _result(self, position: _Position) -> CorrelationEvidence | NoSignFound:
+    def _result(self, position: _Position, detection_psr_threshold: float
+                ) -> CorrelationEvidence | NoSignFound:
         """The evidence of a position after :meth:`_classify` (or :class:`NoSignFound`
-        when its detection PSR is below the threshold)."""
-        if position.detection_psr < self.config.detection_psr_threshold:
+        when its detection PSR is below ``detection_psr_threshold``, the one that kept it
+        from classification)."""
+        if position.detection_psr < detection_psr_threshold:
             return NoSignFound(position.detection_psr)
         if not position.found:
             return NoSignFound()

@@ -188,11 +188,11 @@ class Classifier:
         # more at a larger size where the first answer was "no sign"
         factor = self.config.larger_size_retry_factor
         retried = [index for index, (candidate, answer) in enumerate(zip(candidates, answers))
-                   if factor > 1.0 and answer.label == LABEL_NO_SIGN
+                   if answer.label == LABEL_NO_SIGN
                    and candidate.radius_px >= self.config.larger_size_retry_min_radius_px]
-        retried = sorted(sorted(retried, key=lambda i: -candidates[i].radius_px)
-                         [:self.config.larger_size_retry_max_candidates])
-        if retried:
+        retried = sorted(retried, key=lambda i: -candidates[i].radius_px)[
+            :self.config.larger_size_retry_max_candidates]
+        if factor > 1.0 and retried:
             second = self._classify_at(gray, [
                 (candidates[i].x_px, candidates[i].y_px,
                  candidates[i].radius_px * scale * factor) for i in retried],
