@@ -291,6 +291,32 @@ def test_train_command_builds_a_bank_and_reports_bad_input(tmp_path: Path,
     assert not (tmp_path / 'x.npz').exists()
 
 
+def test_linear_second_opinion_still_trains_and_reads_those_signs(crop_folder: Path) -> None:
+    linear = train_bank([crop_folder], SMALL, dataclasses.replace(TRAINING, model='linear',
+                                                                  min_lead=0.2))
+    assert linear.second_opinion is not None and linear.second_opinion.form == 'linear'
+    assert linear.provenance['training']['model'] == 'linear'
+    classifier = Classifier(SMALL, linear)
+    crops = read_crop_folder(crop_folder)
+    answers = [classifier.classify_crop(cv2.imread(str(c.path), cv2.IMREAD_GRAYSCALE)).label
+               for c in crops]
+    limits = [(c.label, a) for c, a in zip(crops, answers) if c.label.isdigit()]
+    assert sum(truth == answer for truth, answer in limits) >= 0.8 * len(limits)
+    assert not any(answer.isdigit() and answer != truth for truth, answer in limits)
+
+
+def test_train_command_refuses_invalid_settings(tmp_path: Path, crop_folder: Path) -> None:
+    out = tmp_path / 'bank.npz'
+    env = dict(os.environ, PYTHONWARNINGS='ignore')
+    for option in (['--members', '0'], ['--hidden-units', '0'], ['--candidates', '0']):
+        done = subprocess.run(_train_command() + ['build', str(out), str(crop_folder), '-q']
+                              + option, capture_output=True, text=True, timeout=120, env=env)
+        assert done.returncode == 1, option
+        assert 'invalid training setting' in done.stderr and option[0][2:].replace(
+            '-', '_') in done.stderr and 'Traceback' not in done.stderr
+        assert not out.exists()
+
+
 def _opinion(labels: tuple[str, ...], real: tuple[str, ...]) -> SecondOpinion:
     size = len(labels)
     return SecondOpinion(labels, np.zeros(1, np.float32), np.ones(1, np.float32),

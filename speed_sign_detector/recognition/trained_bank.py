@@ -25,7 +25,9 @@ __all__ = ['DEFAULT_BANK_FILE', 'NO_BANK_FILE', 'TRAINED_BANK_FORMAT', 'TrainedB
            'load_trained_bank', 'resolve_bank_file', 'save_trained_bank']
 
 TRAINED_BANK_FORMAT = 'speed_sign_detector.trained_bank'
-TRAINED_BANK_VERSION = 2
+TRAINED_BANK_VERSION = 3
+#: Versions this package reads: 2 (linear second opinion only) and 3 (linear or network).
+READABLE_BANK_VERSIONS = (2, TRAINED_BANK_VERSION)
 #: The bank shipped with the package.
 DEFAULT_BANK_FILE = Path(__file__).resolve().parent / 'data' / 'default_bank.npz'
 #: ``classifier.bank_file`` value for the rendered templates alone (no trained bank).
@@ -72,6 +74,9 @@ def save_trained_bank(path: Path, bank: TrainedBank) -> None:
                       feature_mean=opinion.feature_mean,
                       feature_scale=opinion.feature_scale,
                       weights=opinion.weights.astype(np.float16), bias=opinion.bias)
+        if opinion.hidden_weights is not None:
+            arrays.update(hidden_weights=opinion.hidden_weights.astype(np.float16),
+                          hidden_bias=opinion.hidden_bias)
     for label, examples in bank.class_examples.items():
         arrays[f'examples_{label}'] = np.asarray(examples, np.float16)
     meta = dict(bank.provenance, decision={'candidates': bank.candidates,
@@ -85,7 +90,7 @@ def load_trained_bank(path: Path) -> TrainedBank:
     Raises:
         BankFileError: for a missing, corrupt or incompatible file (the reason named).
     """
-    arrays, meta = load_bank_file(path, TRAINED_BANK_FORMAT, (TRAINED_BANK_VERSION,))
+    arrays, meta = load_bank_file(path, TRAINED_BANK_FORMAT, READABLE_BANK_VERSIONS)
     try:
         opinion = None
         if 'weights' in arrays:
@@ -94,11 +99,10 @@ def load_trained_bank(path: Path) -> TrainedBank:
                                     arrays['feature_scale'].astype(np.float32),
                                     arrays['weights'].astype(np.float32),
                                     arrays['bias'].astype(np.float32),
-                                    tuple(str(n) for n in arrays['opinion_real_labels']))
-            if opinion.weights.shape != (opinion.feature_mean.size, len(opinion.labels)):
-                raise ValueError(f'weights of shape {opinion.weights.shape} do not fit '
-                                 f'{opinion.feature_mean.size} features and '
-                                 f'{len(opinion.labels)} labels')
+                                    tuple(str(n) for n in arrays['opinion_real_labels']),
+                                    *((arrays['hidden_weights'].astype(np.float32),
+                                       arrays['hidden_bias'].astype(np.float32))
+                                      if 'hidden_weights' in arrays else ()))
         examples = {name[len('examples_'):]: array.astype(np.float32)
                     for name, array in arrays.items() if name.startswith('examples_')}
         decision = meta['decision']

@@ -22,6 +22,8 @@ import threading
 from collections.abc import Sequence
 from types import FrameType
 
+from speed_sign_detector.blas_threads import use_one_blas_thread
+
 PROGRAM = 'speed_sign_detector'
 #: What to install when rclpy or a message package is missing.
 ROS_INSTALL_HINT = ('source /opt/ros/jazzy/setup.bash (ROS 2 Jazzy), or in a virtualenv: '
@@ -122,6 +124,7 @@ def missing_ros_message(program: str, err: ImportError) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the node until SIGINT or SIGTERM; returns the exit status."""
+    use_one_blas_thread()   # before numpy is loaded (by the node, below)
     argv = list(sys.argv[1:] if argv is None else argv)
     own, ros_arguments = split_ros_arguments(argv)
     args = build_parser().parse_args(own)  # --help exits 0, an unknown option 2

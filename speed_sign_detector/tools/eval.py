@@ -23,9 +23,13 @@ import argparse
 import logging
 import sys
 
-from speed_sign_detector import __version__
-from speed_sign_detector.tools import eval_bag, eval_crops, eval_scenes, fleet
-from speed_sign_detector.tools.run_control import run_subcommand
+from speed_sign_detector.blas_threads import use_one_blas_thread
+
+use_one_blas_thread()   # before the subcommand modules load numpy
+
+from speed_sign_detector import __version__  # noqa: E402
+from speed_sign_detector.tools import eval_bag, eval_crops, eval_scenes, fleet  # noqa: E402
+from speed_sign_detector.tools.run_control import run_subcommand  # noqa: E402
 
 SUBCOMMAND_MODULES = (eval_scenes, eval_crops, eval_bag, fleet)
 

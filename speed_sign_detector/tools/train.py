@@ -27,6 +27,8 @@ from speed_sign_detector.config import ClassifierConfig, load_yaml
 from speed_sign_detector.errors import SpeedSignError
 from speed_sign_detector.recognition.trained_bank import save_trained_bank
 from speed_sign_detector.recognition.training import (
+    MIN_LEAD_OF_MODEL,
+    SECOND_OPINION_MODELS,
     VARIANTS,
     TrainingConfig,
     cross_validate,
@@ -50,14 +52,26 @@ def build_parser() -> argparse.ArgumentParser:
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     common.add_argument('--config', type=Path, help='YAML parameter file (the node\'s format); '
                         'its classifier settings shape the filters')
+    common.add_argument('--model', choices=SECOND_OPINION_MODELS, default=_DEFAULTS.model,
+                        help='the second opinion: an ensemble of small networks, or a ridge '
+                        'model (linear)')
     common.add_argument('--ridge', type=float, default=_DEFAULTS.ridge,
-                        help='regularisation of the second opinion')
+                        help='regularisation of the linear second opinion')
+    common.add_argument('--hidden-units', type=int, default=_DEFAULTS.hidden_units,
+                        help='hidden units of each network of the second opinion')
+    common.add_argument('--epochs', type=int, default=_DEFAULTS.epochs,
+                        help='training passes of each network')
+    common.add_argument('--members', type=int, default=_DEFAULTS.members,
+                        help='networks in the second opinion\'s ensemble')
     common.add_argument('--candidates', type=int, default=_DEFAULTS.candidates,
                         help='the second opinion chooses among this many leading labels of '
                         'the correlation filters')
-    common.add_argument('--min-lead', type=float, default=_DEFAULTS.min_lead,
+    common.add_argument('--min-lead', type=float, default=None,
                         help='least lead of the second opinion\'s answer over its next best '
-                        'label; less withholds the answer')
+                        'label; less withholds the answer (default: '
+                        + ', '.join(f'{lead} for {model}'
+                                    for model, lead in MIN_LEAD_OF_MODEL.items())
+                        + ')%(default).0s')  # (the formatter adds no "default: None")
     common.add_argument('--augmented-copies', type=int, default=_DEFAULTS.augmented_copies,
                         help='degraded copies (blur, JPEG, contrast, scale) of each crop')
     common.add_argument('--examples-per-class', type=int,
@@ -91,11 +105,17 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _configs(args: argparse.Namespace) -> tuple[ClassifierConfig, TrainingConfig]:
     classifier = load_yaml(args.config).classifier if args.config else ClassifierConfig()
-    training = TrainingConfig(ridge=args.ridge, candidates=args.candidates,
-                              min_lead=args.min_lead, augmented_copies=args.augmented_copies,
-                              examples_per_class=args.examples_per_class,
-                              rendered_per_kind=args.rendered_per_kind,
-                              second_opinion=not args.no_second_opinion, seed=args.seed)
+    min_lead = MIN_LEAD_OF_MODEL[args.model] if args.min_lead is None else args.min_lead
+    try:
+        training = TrainingConfig(model=args.model, ridge=args.ridge,
+                                  hidden_units=args.hidden_units, epochs=args.epochs,
+                                  members=args.members, candidates=args.candidates,
+                                  min_lead=min_lead, augmented_copies=args.augmented_copies,
+                                  examples_per_class=args.examples_per_class,
+                                  rendered_per_kind=args.rendered_per_kind,
+                                  second_opinion=not args.no_second_opinion, seed=args.seed)
+    except ValueError as err:
+        raise SpeedSignError(f'invalid training setting: {err}') from err
     return classifier, training
 
 
