@@ -102,7 +102,7 @@ class TrainingConfig:
     min_lead: float = 0.6
     augmented_copies: int = 4
     examples_per_class: int = 0
-    rendered_per_kind: int = 30
+    rendered_per_kind: int = 100
     second_opinion: bool = True
     seed: int = 0
 
