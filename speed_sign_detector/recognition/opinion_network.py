@@ -77,9 +77,8 @@ def fit_network_opinion(features: np.ndarray, labels: Sequence[str], hidden_unit
     scale = features.std(axis=0) + np.float32(1e-3)
     standardised = (features - mean) / scale
     trained = [_fit_member(standardised, index, len(names), sample_weights, hidden_units,
-                           max(epochs, -(-min_steps // -(-len(index) // batch_size))),
-                           np.random.default_rng([seed, member]), learning_rate,
-                           weight_decay, batch_size) for member in range(members)]
+                           epochs, min_steps, np.random.default_rng([seed, member]),
+                           learning_rate, weight_decay, batch_size) for member in range(members)]
     real = tuple(name for name in names if real_labels is None or name in real_labels)
     return SecondOpinion(names, mean, scale.astype(np.float32),
                          np.stack([member[2] for member in trained]),
@@ -89,10 +88,11 @@ def fit_network_opinion(features: np.ndarray, labels: Sequence[str], hidden_unit
 
 
 def _fit_member(standardised: np.ndarray, index: np.ndarray, classes: int,
-                sample_weights: np.ndarray, hidden_units: int, epochs: int,
+                sample_weights: np.ndarray, hidden_units: int, epochs: int, min_steps: int,
                 rng: np.random.Generator, learning_rate: float, weight_decay: float,
                 batch_size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """One member: (W1 (D, H), b1 (H,), W2 (H, C), b2 (C,)), float32."""
+    """One member: (W1 (D, H), b1 (H,), W2 (H, C), b2 (C,)), float32; ``epochs`` passes,
+    or more to reach ``min_steps`` steps."""
     count, dimension = standardised.shape
     params = [
         (rng.standard_normal((dimension, hidden_units)) * np.sqrt(2.0 / dimension)
@@ -104,6 +104,7 @@ def _fit_member(standardised: np.ndarray, index: np.ndarray, classes: int,
     first_moment = [np.zeros_like(p) for p in params]
     second_moment = [np.zeros_like(p) for p in params]
     steps_per_epoch = -(-count // batch_size)
+    epochs = max(epochs, -(-min_steps // steps_per_epoch))
     total_steps = epochs * steps_per_epoch
     step = 0
     for _ in range(epochs):

@@ -134,7 +134,7 @@ class SecondOpinion:
             # model, which learned it from renderings, reads it too, and not as "rather
             # not this class" (its one-vs-rest target is +1 for the class, -1 else)
             best = int(order[0])
-            floor = RENDERED_ONLY_MIN_SCORE if self.hidden_weights is None else \
+            floor = RENDERED_ONLY_MIN_SCORE if self.form == 'linear' else \
                 NETWORK_RENDERED_ONLY_MIN_SCORE
             standing = self.labels[best] == distinct[0] and float(scores[best]) >= floor
             return distinct[0] if standing else None

@@ -69,6 +69,13 @@ _LOG = logging.getLogger(__name__)
 ProgressCallback = Callable[[int, int], None]
 
 
+#: The second opinion's forms :class:`TrainingConfig` takes.
+SECOND_OPINION_MODELS: tuple[str, ...] = ('network', 'linear')
+#: The least lead chosen for each form (5-fold gtsrb-dev): the network's ensemble scores
+#: are averaged probabilities, the linear model's regression outputs.
+MIN_LEAD_OF_MODEL: dict[str, float] = {'network': 0.6, 'linear': 0.2}
+
+
 @dataclass(frozen=True)
 class TrainingConfig:
     """How a bank is trained.
@@ -99,7 +106,7 @@ class TrainingConfig:
     epochs: int = 12
     members: int = 3
     candidates: int = 3
-    min_lead: float = 0.6
+    min_lead: float = MIN_LEAD_OF_MODEL['network']
     augmented_copies: int = 4
     examples_per_class: int = 0
     rendered_per_kind: int = 100
@@ -117,12 +124,6 @@ class TrainingConfig:
             raise ValueError('augmented_copies and rendered_per_kind must be >= 0, got '
                              f'{self.augmented_copies} and {self.rendered_per_kind}')
 
-
-#: The second opinion's forms :class:`TrainingConfig` takes.
-SECOND_OPINION_MODELS: tuple[str, ...] = ('network', 'linear')
-#: The least lead chosen for each form (5-fold gtsrb-dev): the network's ensemble scores
-#: are averaged probabilities, the linear model's regression outputs.
-MIN_LEAD_OF_MODEL: dict[str, float] = {'network': 0.6, 'linear': 0.2}
 
 
 @dataclass(frozen=True)
