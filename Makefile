@@ -45,7 +45,7 @@ test: $(INSTALLED)
 DATA ?= ../shared/data
 bank: $(INSTALLED)
 	$(BIN)/speed_sign_train build speed_sign_detector/recognition/data/default_bank.npz \
-		$(DATA)/gtsrb-dev $(DATA)/gtsrb-lookalikes-dev
+		$(DATA)/gtsrb-dev $(DATA)/gtsrb-lookalikes-dev --scenes $(DATA)/gtsdb-dev
 
 ## bench: accuracy and speed against the peers, written to out/bench/
 bench: $(INSTALLED)

@@ -32,7 +32,7 @@ import numpy as np
 
 from speed_sign_detector.config import DetectorConfig
 from speed_sign_detector.detection.detector import Detector
-from speed_sign_detector.tools.eval_scenes import SceneSign, read_gtsdb_truth
+from speed_sign_detector.scene_truth import SceneSign, read_gtsdb_truth
 
 Centres = list[tuple[float, float]]
 Method = Callable[[np.ndarray], Centres]

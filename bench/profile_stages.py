@@ -36,7 +36,7 @@ from speed_sign_detector.config import DetectorConfig
 from speed_sign_detector.detection.detector import Detector
 from speed_sign_detector.recognition.classifier import Classifier
 from speed_sign_detector.tools.eval_crops import read_labels
-from speed_sign_detector.tools.eval_scenes import read_gtsdb_truth
+from speed_sign_detector.scene_truth import read_gtsdb_truth
 
 
 def _print(profile: cProfile.Profile, lines: int) -> None:

@@ -86,11 +86,8 @@ from speed_sign_detector.errors import SpeedSignError
 from speed_sign_detector.pipeline import FrameResult, OverlappedPipeline, Pipeline
 from speed_sign_detector.recognition.classifier import Classifier
 from speed_sign_detector.ros.node import NODE_NAME
-from speed_sign_detector.tools.eval_scenes import (
-    SIZE_BINS_PX,
-    SceneSign,
-    read_gtsdb_truth,
-)
+from speed_sign_detector.scene_truth import SceneSign, read_gtsdb_truth
+from speed_sign_detector.tools.eval_scenes import SIZE_BINS_PX
 
 PROJECT_ROOT = BENCH_DIR.parent
 DATA_DIR = PROJECT_ROOT.parent / 'shared' / 'data'

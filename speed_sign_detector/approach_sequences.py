@@ -1,7 +1,7 @@
 """Approach sequences with real pixels: annotated road scenes turned into a drive-like stream.
 
 A GTSDB-format scene folder (``images/`` and ``gt.txt``, see
-:func:`speed_sign_detector.tools.eval_scenes.read_gtsdb_truth`) holds single frames. For
+:func:`speed_sign_detector.scene_truth.read_gtsdb_truth`) holds single frames. For
 the development loop of temporal integration this module turns each speed-limit sign
 of at least ``min_sign_px`` (mean of box width and height) into a short **approach
 sequence**: ``frames_per_sequence`` frames (12 by default, 10 Hz) in which the view
@@ -65,7 +65,7 @@ from speed_sign_detector.synthetic import (
     MIN_TRUTH_VISIBLE_FRACTION,
     SyntheticFrame,
 )
-from speed_sign_detector.tools.eval_scenes import (
+from speed_sign_detector.scene_truth import (
     SPEED_LIMIT_CLASSES,
     SceneSign,
     read_gtsdb_truth,

@@ -150,11 +150,11 @@ class ClassifierConfig:
                                    'the answer needs its clearer lead).', low=0.0,
                                    high=1000.0)
     second_opinion_psr_threshold: float = setting(
-        7.0, 'With a trained second opinion, the PSR below which the answer is "no sign" '
+        6.0, 'With a trained second opinion, the PSR below which the answer is "no sign" '
         '(instead of psr_threshold); below psr_threshold the second opinion must then lead by '
         'second_opinion_low_psr_lead.', low=0.0, high=1000.0)
     second_opinion_low_psr_lead: float = setting(
-        0.5, 'Least score lead of the second opinion for an answer whose PSR is below '
+        1.0, 'Least score lead of the second opinion for an answer whose PSR is below '
         'psr_threshold (it needs the bank\'s own min_lead above it).', low=0.0, high=10.0)
     min_margin: float = setting(0.25, 'PSR lead over the best other label below which an '
                                 'end-of-limit answer, and a speed-limit answer without a '
@@ -280,6 +280,10 @@ class TrackerConfig:
     association_radius_factor: float = setting(1.0, 'A candidate joins a track when its '
                                                'centre lies within this many track radii.',
                                                low=0.1, high=10.0)
+    unpredicted_association_radius_factor: float = setting(
+        2.0, 'The same for a track observed once, whose motion is not known yet (at 10 Hz '
+        'a near sign drifts more than its radius from one frame to the next).', low=0.1,
+        high=10.0)
     growth_boost: float = setting(1.5, 'Factor on the vote of an observation that is larger '
                                   'than the oldest one in the window (approaching sign).',
                                   low=1.0, high=10.0)

@@ -2,11 +2,12 @@
 
 Follows IVS 2011 section III-C and DAGM 2010 section 4: a running table of sign
 candidates over the last ~10 frames. A candidate joins the track whose predicted centre
-is nearest (within ``association_radius_factor`` radii). Each observation votes for its
-label with its PSR, multiplied by ``growth_boost`` when the sign is larger than at the
-oldest observation still in the window (an approaching sign; at 30 fps a sign grows a
-few per cent per frame, within the noise of one frame to the next, so growth is judged
-over the window), by ``shrink_penalty`` when it is smaller, and by ``rotation_penalty``
+is nearest (within ``association_radius_factor`` radii, or
+``unpredicted_association_radius_factor`` for a track observed once, whose velocity is not
+known yet). Each observation votes for its label with its PSR, multiplied by
+``growth_boost`` when the sign is larger than at the oldest observation still in the
+window (an approaching sign; at 30 fps a sign grows a few per cent per frame, within the
+noise of one frame to the next, so growth is judged over the window), by ``shrink_penalty`` when it is smaller, and by ``rotation_penalty``
 when its in-plane rotation jumps from the previous observation. A track's evidence for
 a label is the sum of its votes inside the window (``window_frames`` frames and
 ``window_s`` seconds of message time, whichever is shorter): an artifact that stays the
@@ -246,8 +247,9 @@ class Tracker:
                 continue
             predicted_x, predicted_y = track.predicted_centre(stamp_s)
             distance = math.hypot(x_px - predicted_x, y_px - predicted_y)
-            gate = self.config.association_radius_factor * max(track.radius_px,
-                                                               classification.radius_px)
+            factor = (self.config.association_radius_factor if track.observations > 1
+                      else self.config.unpredicted_association_radius_factor)
+            gate = factor * max(track.radius_px, classification.radius_px)
             if distance <= gate and distance < best_distance:
                 best, best_distance = track, distance
         if best is not None:

@@ -1,7 +1,8 @@
 """Synthetic scenes with known answers, shared by the pipeline and node tests."""
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -46,3 +47,31 @@ def approach_frames(kind: str, count: int, seed: int,
         paste(frame, bgr, alpha, left, top)
         frame = cv2.GaussianBlur(frame, (3, 3), 0.6)
         yield frame, left + diameter / 2, top + diameter / 2, diameter / 2
+
+
+def write_gtsdb_scenes(folder: Path,
+                       scenes: Sequence[tuple[str, Sequence[tuple[str, int, int, int, int]]]],
+                       width: int, height: int) -> Path:
+    """A GTSDB-format folder (``images/`` and ``gt.txt``) of rendered signs pasted on
+    desaturated clutter (no sign-red in the background, so the red ring marks the sign).
+
+    Args:
+        folder: where to write.
+        scenes: (file, [(kind, GTSDB class, diameter px, centre x, centre y)]) per image.
+        width, height: image size, pixels.
+    """
+    (folder / 'images').mkdir(parents=True, exist_ok=True)
+    lines = []
+    for seed, (name, signs) in enumerate(scenes):
+        clutter = textured_background(seed, width, height)
+        gray = cv2.cvtColor(clutter, cv2.COLOR_BGR2GRAY)[..., None].astype(np.float32)
+        scene = (0.3 * clutter + 0.7 * gray).astype(np.uint8)
+        for kind, class_id, diameter, x, y in signs:
+            bgr, alpha = render_sign(kind, diameter)
+            left, top = x - diameter // 2, y - diameter // 2
+            paste(scene, bgr, alpha, left, top)
+            lines.append(f'{name};{left};{top};{left + diameter};{top + diameter};{class_id}')
+        assert cv2.imwrite(str(folder / 'images' / name), scene,
+                           [cv2.IMWRITE_JPEG_QUALITY, 95])
+    (folder / 'gt.txt').write_text('\n'.join(lines) + '\n')
+    return folder

@@ -7,10 +7,9 @@ import json
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 import pytest
-from scene_helpers import paste, textured_background
+from scene_helpers import write_gtsdb_scenes
 
 from speed_sign_detector.approach_sequences import (
     GTSDB_CLASS_KINDS,
@@ -19,7 +18,6 @@ from speed_sign_detector.approach_sequences import (
     ApproachStream,
 )
 from speed_sign_detector.bag_io import BagReader
-from speed_sign_detector.recognition.templates import render_sign
 from speed_sign_detector.tools import eval as eval_tool
 from speed_sign_detector.tools import synth
 from speed_sign_detector.truth import group_tracks, read_truth
@@ -38,23 +36,8 @@ FRAMES, GAP_FRAMES = 12, 15
 @pytest.fixture(scope='module')
 def scenes_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A GTSDB-format folder of rendered signs pasted on clutter, with its gt.txt."""
-    folder = tmp_path_factory.mktemp('scenes')
-    (folder / 'images').mkdir()
-    lines = []
-    for seed, (name, signs) in enumerate(SCENES):
-        clutter = textured_background(seed, SCENE_WIDTH, SCENE_HEIGHT)
-        # desaturated: no sign-red in the background, so the red ring marks the sign
-        gray = cv2.cvtColor(clutter, cv2.COLOR_BGR2GRAY)[..., None].astype(np.float32)
-        scene = (0.3 * clutter + 0.7 * gray).astype(np.uint8)
-        for kind, class_id, diameter, x, y in signs:
-            bgr, alpha = render_sign(kind, diameter)
-            left, top = x - diameter // 2, y - diameter // 2
-            paste(scene, bgr, alpha, left, top)
-            lines.append(f'{name};{left};{top};{left + diameter};{top + diameter};{class_id}')
-        assert cv2.imwrite(str(folder / 'images' / name), scene,
-                           [cv2.IMWRITE_JPEG_QUALITY, 95])
-    (folder / 'gt.txt').write_text('\n'.join(lines) + '\n')
-    return folder
+    return write_gtsdb_scenes(tmp_path_factory.mktemp('scenes'), SCENES, SCENE_WIDTH,
+                              SCENE_HEIGHT)
 
 
 def red_centroid(bgr: np.ndarray, box: tuple[float, float, float, float]

@@ -16,7 +16,7 @@ from speed_sign_detector.detection.candidates import Candidate
 from speed_sign_detector.detection.detector import Detector
 from speed_sign_detector.recognition.templates import render_sign
 from speed_sign_detector.tools import eval as eval_tool
-from speed_sign_detector.tools.eval_scenes import SceneSign, is_found, read_gtsdb_truth
+from speed_sign_detector.scene_truth import SceneSign, is_found, read_gtsdb_truth
 
 KEYS = {'frames', 'signs', 'candidate_recall', 'ms_per_frame', 'detector_ms_per_frame',
         'backend'}

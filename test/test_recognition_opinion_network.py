@@ -170,5 +170,8 @@ def test_shipped_bank_is_small_and_records_its_provenance() -> None:
     assert [folder.rsplit('/', 1)[-1] for folder in record['data_folders']] == [
         'gtsrb-dev', 'gtsrb-lookalikes-dev']
     assert record['counts_per_class']['other_sign'] > 0 and record['package_version']
+    # real background and whole-frame signs from the annotated scenes of gtsdb-dev
+    assert [folder.rsplit('/', 1)[-1] for folder in record['scene_folders']] == ['gtsdb-dev']
+    assert record['scene_examples']['no_sign'] > 0 and 'no_sign' in opinion.real_labels
     # the limits it has no real examples of are learned from renderings only
     assert {'5', '130'} <= set(opinion.labels) - set(opinion.real_labels)

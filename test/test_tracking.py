@@ -208,3 +208,24 @@ def test_a_far_sign_decided_first_gives_way_to_the_nearer_one() -> None:
     # the far 20 is decided on frame 1 (20 + 30), the near 30 only on frame 4
     # (4 + 6 + 6 + 6 + 6 = 28): 20 is shown until then, then the nearer 30
     assert actives == [0, 20, 20, 20, 30, 30]
+
+
+def test_a_near_sign_drifting_more_than_its_radius_per_frame_keeps_one_track() -> None:
+    """At 10 Hz a near sign moves more than its radius between frames: a track seen once
+    (no velocity yet) takes it within unpredicted_association_radius_factor radii, then
+    the velocity predicts the rest. The real case: approach sequences of gtsdb-dev."""
+    def drive(config: TrackerConfig) -> tuple[list[int], int]:
+        tracker = Tracker(config)
+        recognized = []
+        for index in range(10):
+            radius = 10.0 * 1.07 ** index
+            # drifts outward faster and faster: 12 px, then 13, 14, ... per frame
+            x_px = 300.0 + 12.0 * index + 0.5 * index * index
+            update = tracker.update(index * 0.1, [observation('80', x_px, 200.0, radius)])
+            recognized.append(update.recognized_limit_kmh)
+        return recognized, max(track.track_id for track in update.tracks)
+    recognized, last_track = drive(TrackerConfig())
+    assert recognized.count(80) == 1 and last_track == 1
+    # with the old single gate every frame started a new track and nothing was recognized
+    recognized, last_track = drive(TrackerConfig(unpredicted_association_radius_factor=1.0))
+    assert 80 not in recognized and last_track == 10

@@ -130,14 +130,15 @@ class SecondOpinion:
             return None
         order = np.argsort(-scores)
         if distinct[0] not in self.real_labels:
-            # no real examples of the correlation's winner: it stands only where the
-            # model, which learned it from renderings, reads it too, and not as "rather
-            # not this class" (its one-vs-rest target is +1 for the class, -1 else)
+            # no real examples of the correlation's winner: it stands where the model,
+            # which learned it from renderings, reads it too, and not as "rather not this
+            # class" (its one-vs-rest target is +1 for the class, -1 else); otherwise the
+            # model may still choose a label with real examples among the leading ones
             best = int(order[0])
             floor = RENDERED_ONLY_MIN_SCORE if self.form == 'linear' else \
                 NETWORK_RENDERED_ONLY_MIN_SCORE
-            standing = self.labels[best] == distinct[0] and float(scores[best]) >= floor
-            return distinct[0] if standing else None
+            if self.labels[best] == distinct[0] and float(scores[best]) >= floor:
+                return distinct[0]
         real = [int(i) for i in order if self.labels[int(i)] in self.real_labels]
         model_best = self.labels[real[0]]
         lead = float(scores[real[0]] - scores[real[1]]) if len(real) > 1 else np.inf

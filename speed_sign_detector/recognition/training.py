@@ -38,19 +38,27 @@ import cv2
 import numpy as np
 
 from speed_sign_detector import __version__
-from speed_sign_detector.config import ClassifierConfig
+from speed_sign_detector.config import ClassifierConfig, DetectorConfig
 from speed_sign_detector.errors import TrainingDataError
 from speed_sign_detector.recognition.classifier import (
     Classification,
     Classifier,
     CorrelationEvidence,
 )
+from speed_sign_detector.recognition.degradation import degraded, jittered
 from speed_sign_detector.recognition.labelled_crops import (
     LabelledCrop,
     read_crop_folder,
     track_folds,
 )
 from speed_sign_detector.recognition.opinion_network import fit_network_opinion
+from speed_sign_detector.recognition.scene_examples import (
+    DetectedScene,
+    SceneExamples,
+    detect_scenes,
+    read_scene_examples,
+)
+from speed_sign_detector.recognition.scene_validation import cross_validate_scenes
 from speed_sign_detector.recognition.second_opinion import fit_second_opinion
 from speed_sign_detector.recognition.sign_features import aligned_patches, sign_features
 from speed_sign_detector.recognition.templates import (
@@ -96,6 +104,8 @@ class TrainingConfig:
         rendered_per_kind: rendered, degraded crops of every sign kind the package draws
             (all limits, end-of-limit signs, look-alikes) added to the second opinion's
             training, so that it knows the values with no real examples.
+        scene_copies: degraded copies of each example cut from annotated scenes
+            (:mod:`.scene_examples`).
         second_opinion: train the second opinion at all.
         seed: seeds the augmentation, the k-means and the networks' training.
     """
@@ -110,6 +120,7 @@ class TrainingConfig:
     augmented_copies: int = 4
     examples_per_class: int = 0
     rendered_per_kind: int = 100
+    scene_copies: int = 2
     second_opinion: bool = True
     seed: int = 0
 
@@ -120,9 +131,9 @@ class TrainingConfig:
         for name in ('hidden_units', 'epochs', 'members', 'candidates'):
             if getattr(self, name) < 1:
                 raise ValueError(f'{name} must be >= 1, got {getattr(self, name)}')
-        if self.augmented_copies < 0 or self.rendered_per_kind < 0:
-            raise ValueError('augmented_copies and rendered_per_kind must be >= 0, got '
-                             f'{self.augmented_copies} and {self.rendered_per_kind}')
+        for name in ('augmented_copies', 'rendered_per_kind', 'scene_copies'):
+            if getattr(self, name) < 0:
+                raise ValueError(f'{name} must be >= 0, got {getattr(self, name)}')
 
 
 
@@ -201,31 +212,6 @@ def locate_signs(classifier: Classifier, crops: Sequence[LabelledCrop],
     return LocatedCrops(tuple(crops), signs, tuple(images), tuple(found))
 
 
-def _degraded(image: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """A copy of a crop as a worse camera would see it: blur, JPEG, contrast loss and
-    down-scaling, each drawn at random (same size as the input)."""
-    out = image.astype(np.float32)
-    if rng.random() < 0.6:
-        out = cv2.GaussianBlur(out, (0, 0), float(rng.uniform(0.5, 1.5)))
-    if rng.random() < 0.5:
-        factor = float(rng.uniform(0.45, 0.8))
-        height, width = out.shape
-        small = cv2.resize(out, (max(4, round(width * factor)), max(4, round(height * factor))),
-                           interpolation=cv2.INTER_AREA)
-        out = cv2.resize(small, (width, height), interpolation=cv2.INTER_LINEAR)
-    if rng.random() < 0.6:
-        gain = float(rng.uniform(0.35, 0.8))
-        out = (out - out.mean()) * gain + out.mean() + float(rng.uniform(-30, 30))
-    out = np.clip(out + rng.normal(0.0, float(rng.uniform(0.0, 4.0)), out.shape), 0, 255)
-    out = out.astype(np.uint8)
-    if rng.random() < 0.6:
-        quality = int(rng.integers(15, 60))
-        ok, encoded = cv2.imencode('.jpg', out, [cv2.IMWRITE_JPEG_QUALITY, quality])
-        if ok:
-            out = cv2.imdecode(encoded, cv2.IMREAD_GRAYSCALE)
-    return out
-
-
 def rendered_training_crops(per_kind: int, rng: np.random.Generator
                             ) -> tuple[list[np.ndarray], list[str]]:
     """Rendered crops (GTSRB framing) of every limit, end-of-limit sign and look-alike the
@@ -247,18 +233,9 @@ def rendered_training_crops(per_kind: int, rng: np.random.Generator
                                  yaw_deg=float(rng.uniform(-25, 25)),
                                  pitch_deg=float(rng.uniform(-10, 10)),
                                  roll_deg=float(rng.uniform(-6, 6)))
-            crops.append(_degraded(crop, rng))
+            crops.append(degraded(crop, rng))
             labels.append(label)
     return crops, labels
-
-
-def _jittered(sign: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """(x, y, radius) moved by up to 6% of the radius and scaled by up to +-6%: the
-    run-time location is not exact."""
-    x_px, y_px, radius_px = sign
-    shift = rng.uniform(-0.06, 0.06, 2) * radius_px
-    return np.asarray([x_px + shift[0], y_px + shift[1],
-                       radius_px * float(rng.uniform(0.94, 1.06))])
 
 
 def _class_means(patches: np.ndarray, count: int, rng: np.random.Generator) -> np.ndarray:
@@ -277,10 +254,12 @@ def _class_means(patches: np.ndarray, count: int, rng: np.random.Generator) -> n
 
 def train_from_located(located: LocatedCrops, config: TrainingConfig,
                        provenance: dict[str, Any] | None = None,
-                       rendered: LocatedCrops | None = None) -> TrainedBank:
+                       rendered: LocatedCrops | None = None,
+                       scenes: SceneExamples | None = None) -> TrainedBank:
     """Train the bank's parts from crops located by the rendered-only classifier
-    (``rendered``: located rendered crops, :func:`rendered_training_crops`, for the second
-    opinion).
+    (``rendered``: located rendered crops, :func:`rendered_training_crops`, and
+    ``scenes``: examples cut from annotated scenes, :mod:`.scene_examples`, both for the
+    second opinion).
 
     Raises:
         TrainingDataError: when fewer than two labels have a located crop.
@@ -306,9 +285,9 @@ def train_from_located(located: LocatedCrops, config: TrainingConfig,
         feature_rows = [sign_features(patches)]
         feature_labels = list(found_labels)
         for _ in range(config.augmented_copies):
-            degraded = [aligned_patches(_degraded(image, rng), _jittered(sign, rng)[None])
+            copies = [aligned_patches(degraded(image, rng), jittered(sign, rng)[None])
                         for image, sign, ok in zip(located.images, located.signs, found) if ok]
-            feature_rows.append(sign_features(np.concatenate(degraded)))
+            feature_rows.append(sign_features(np.concatenate(copies)))
             feature_labels += found_labels
         if rendered is not None:
             usable = np.isfinite(rendered.signs[:, 0])
@@ -316,6 +295,11 @@ def train_from_located(located: LocatedCrops, config: TrainingConfig,
                 [aligned_patches(image, sign[None]) for image, sign, ok in zip(
                     rendered.images, rendered.signs, usable) if ok])))
             feature_labels += [c.label for c, ok in zip(rendered.crops, usable) if ok]
+        real_labels = set(found_labels)
+        if scenes is not None and len(scenes):
+            feature_rows.append(scenes.features)
+            feature_labels += scenes.labels
+            real_labels |= set(scenes.labels)
         features = np.concatenate(feature_rows)
         # every label weighs the same in total (rare limits are not drowned)
         counts = Counter(feature_labels)
@@ -324,14 +308,15 @@ def train_from_located(located: LocatedCrops, config: TrainingConfig,
         if config.model == 'network':
             opinion = fit_network_opinion(features, feature_labels, config.hidden_units,
                                           config.epochs, config.members, config.seed, weights,
-                                          real_labels=sorted(set(found_labels)))
+                                          real_labels=sorted(real_labels))
         else:
             opinion = fit_second_opinion(features, feature_labels, config.ridge, weights,
-                                         real_labels=sorted(set(found_labels)))
+                                         real_labels=sorted(real_labels))
     counts_by_label = Counter(labels)
     record = dict(provenance or {})
     record.update(crops=len(labels), located=int(found.sum()),
                   counts_per_class=dict(sorted(counts_by_label.items())),
+                  scene_examples=scenes.counts() if scenes is not None else {},
                   training=dataclasses.asdict(config), package_version=__version__)
     return TrainedBank(opinion, config.candidates, config.min_lead, examples, record)
 
@@ -358,10 +343,30 @@ def locate_rendered(classifier: Classifier, config: TrainingConfig) -> LocatedCr
                         images)
 
 
+def _scene_examples(folders: Sequence[Path], classifier: Classifier,
+                    detector_config: DetectorConfig, config: TrainingConfig, backend: str
+                    ) -> tuple[list[DetectedScene], SceneExamples | None]:
+    """The detected scenes of ``folders`` and their examples (none without folders or a
+    second opinion)."""
+    if not folders or not config.second_opinion:
+        return [], None
+    scenes, unreadable = detect_scenes(folders, detector_config, backend)
+    examples = read_scene_examples(scenes, classifier, config.scene_copies, config.seed + 2,
+                                   unreadable)
+    _LOG.info('%d examples from %d scenes: %s', len(examples), len(scenes),
+              ', '.join(f'{label} {count}' for label, count in examples.counts().items()))
+    return scenes, examples
+
+
 def train_bank(folders: Sequence[Path], classifier_config: ClassifierConfig = ClassifierConfig(),
                config: TrainingConfig = TrainingConfig(),
-               progress: ProgressCallback | None = None) -> TrainedBank:
-    """Train a bank from labelled crop folders (GTSRB ``labels.csv`` format).
+               progress: ProgressCallback | None = None,
+               scene_folders: Sequence[Path] = (),
+               detector_config: DetectorConfig = DetectorConfig(),  # noqa: B008 (frozen)
+               backend: str = 'auto') -> TrainedBank:
+    """Train a bank from labelled crop folders (GTSRB ``labels.csv`` format) and annotated
+    scene folders (GTSDB format, :mod:`.scene_examples`; their candidates come from the
+    detector of ``detector_config`` on ``backend``).
 
     Raises:
         TrainingDataError: for unusable folders or too few located crops.
@@ -370,10 +375,13 @@ def train_bank(folders: Sequence[Path], classifier_config: ClassifierConfig = Cl
     crops, images, unreadable = read_crops(folders)
     classifier = _rendered_classifier(classifier_config)
     located = locate_signs(classifier, crops, images, progress)
+    _, scenes = _scene_examples(scene_folders, classifier, detector_config, config, backend)
     provenance = {'data_folders': [str(Path(f)) for f in folders],
-                  'unreadable': unreadable,
+                  'scene_folders': [str(Path(f)) for f in scene_folders],
+                  'unreadable': unreadable + list(scenes.unreadable if scenes else ()),
                   'classifier': dataclasses.asdict(classifier_config)}
-    bank = train_from_located(located, config, provenance, locate_rendered(classifier, config))
+    bank = train_from_located(located, config, provenance, locate_rendered(classifier, config),
+                              scenes)
     _LOG.info('trained on %d crops in %.1f s', len(crops), time.perf_counter() - started)
     return bank
 
@@ -438,12 +446,19 @@ def summarise(truths: Sequence[str], answers: Sequence[str], class_ids: Sequence
 def cross_validate(folders: Sequence[Path], folds: int = 5,
                    classifier_config: ClassifierConfig = ClassifierConfig(),
                    config: TrainingConfig = TrainingConfig(),
-                   progress: ProgressCallback | None = None) -> dict[str, Any]:
-    """k-fold validation split by track (see the module docstring).
+                   progress: ProgressCallback | None = None,
+                   scene_folders: Sequence[Path] = (),
+                   detector_config: DetectorConfig = DetectorConfig(),  # noqa: B008 (frozen)
+                   backend: str = 'auto') -> dict[str, Any]:
+    """k-fold validation split by track (see the module docstring). With
+    ``scene_folders`` every crop fold's bank also learns from all scenes, and the scenes
+    are validated too, k folds by scene (:func:`.scene_validation.cross_validate_scenes`:
+    each fold's bank learns from every crop and the other folds' scenes).
 
     Returns:
         ``{'folds': k, 'variants': {variant: summary over all crops}, 'fold_accuracy':
-        {variant: [per-fold accuracy]}, 'accuracy_mean'/'accuracy_std': {variant: ...}}``.
+        {variant: [per-fold accuracy]}, 'accuracy_mean'/'accuracy_std': {variant: ...}}``,
+        and with scenes ``'scenes'``: the scene folds' figures.
 
     Raises:
         TrainingDataError: for unusable folders.
@@ -462,13 +477,16 @@ def cross_validate(folders: Sequence[Path], folds: int = 5,
     rendered = _rendered_classifier(classifier_config)
     located = locate_signs(rendered, crops, images, step)
     rendered_crops = locate_rendered(rendered, config)
+    detected, scenes = _scene_examples(scene_folders, rendered, detector_config, config,
+                                       backend)
     answers: dict[str, list[str]] = {variant: [''] * len(crops) for variant in VARIANTS}
     for index, image in enumerate(images):
         answers['rendered'][index] = rendered.decide(image, located.evidence[index],
                                                      crop=True).label
     for fold in range(folds):
         train = fold_of != fold
-        bank = train_from_located(located.subset(train), config, rendered=rendered_crops)
+        bank = train_from_located(located.subset(train), config, rendered=rendered_crops,
+                                  scenes=scenes)
         trained = Classifier(classifier_config, bank)
         for index in np.flatnonzero(~train):
             # without real examples in its composite filters the trained classifier
@@ -500,5 +518,11 @@ def cross_validate(folders: Sequence[Path], folds: int = 5,
         report['fold_accuracy'][variant] = per_fold
         report['accuracy_mean'][variant] = float(np.mean(per_fold))
         report['accuracy_std'][variant] = float(np.std(per_fold))
+    if scenes is not None:
+        report['scene_folders'] = [str(f) for f in scene_folders]
+        report['scenes'] = cross_validate_scenes(
+            detected, scenes, folds, lambda kept: train_from_located(
+                located, config, rendered=rendered_crops, scenes=kept), classifier_config)
+        report['unreadable'] += list(scenes.unreadable)
     return report
 

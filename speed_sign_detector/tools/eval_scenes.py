@@ -28,19 +28,22 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import math
 import statistics
 import sys
 import time
-from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
 from speed_sign_detector.config import PipelineConfig, load_yaml
-from speed_sign_detector.detection.candidates import Candidate
 from speed_sign_detector.detection.detector import Detector
 from speed_sign_detector.errors import InvalidFrameError, TruthFileError
 from speed_sign_detector.recognition.classifier import Classification, Classifier
+from speed_sign_detector.scene_truth import (
+    count_false_limits,
+    is_recognized,
+    matching_candidate,
+    read_gtsdb_truth,
+    scene_image_files,
+)
 from speed_sign_detector.tools.image_files import (
     UnreadableImage,
     UnreadableImageError,
@@ -52,9 +55,6 @@ from speed_sign_detector.tools.run_control import (
     stop_on_interrupt,
 )
 
-#: GTSDB class id -> speed limit in km/h (class 6, end of 80, is not a limit).
-SPEED_LIMIT_CLASSES: dict[int, int] = {0: 20, 1: 30, 2: 50, 3: 60, 4: 70, 5: 80, 7: 100,
-                                       8: 120}
 #: Radius ranges (pixels) of the per-size recall figures.
 SIZE_BINS_PX: tuple[tuple[float, float], ...] = ((0.0, 8.0), (8.0, 12.0), (12.0, 20.0),
                                                  (20.0, 1000.0))
@@ -77,94 +77,6 @@ backend, ...; with classification recognized, recognition_recall, false_limits,
 false_limits_per_frame). Unreadable images are skipped and listed ("unreadable"),
 exit status 1. Ctrl-C reports the frames done, marked "partial", exit status 130.
 """
-
-
-@dataclass(frozen=True)
-class SceneSign:
-    """One sign of a GTSDB scene.
-
-    Attributes:
-        file: image file name (relative to ``images/``).
-        x1_px, y1_px, x2_px, y2_px: its box, pixels.
-        class_id: GTSDB class id.
-    """
-
-    file: str
-    x1_px: float
-    y1_px: float
-    x2_px: float
-    y2_px: float
-    class_id: int
-
-    @property
-    def centre_px(self) -> tuple[float, float]:
-        """Box centre (x, y), pixels."""
-        return 0.5 * (self.x1_px + self.x2_px), 0.5 * (self.y1_px + self.y2_px)
-
-    @property
-    def radius_px(self) -> float:
-        """``(w + h) / 4``, pixels."""
-        return 0.25 * ((self.x2_px - self.x1_px) + (self.y2_px - self.y1_px))
-
-    @property
-    def limit_kmh(self) -> int:
-        """Speed limit of the sign, km/h; 0 when it is not a speed-limit sign."""
-        return SPEED_LIMIT_CLASSES.get(self.class_id, 0)
-
-
-def read_gtsdb_truth(path: Path) -> dict[str, list[SceneSign]]:
-    """Read a GTSDB ``gt.txt``: signs per image file.
-
-    Raises:
-        TruthFileError: missing file or a malformed line (named with its number).
-    """
-    try:
-        text = path.read_text(encoding='utf-8')
-    except OSError as err:
-        raise TruthFileError(f'cannot read GTSDB truth file {path}: {err}') from err
-    signs: dict[str, list[SceneSign]] = {}
-    for number, line in enumerate(text.splitlines(), start=1):
-        if not line.strip():
-            continue
-        fields = line.strip().split(';')
-        if len(fields) != 6:
-            raise TruthFileError(f'{path}:{number}: expected file;x1;y1;x2;y2;classId, '
-                                 f'got {line!r}')
-        try:
-            x1, y1, x2, y2 = (float(value) for value in fields[1:5])
-            class_id = int(fields[5])
-        except ValueError as err:
-            raise TruthFileError(f'{path}:{number}: not a number in {line!r}') from err
-        if x2 <= x1 or y2 <= y1:
-            raise TruthFileError(f'{path}:{number}: empty box in {line!r}')
-        signs.setdefault(fields[0], []).append(SceneSign(fields[0], x1, y1, x2, y2, class_id))
-    return signs
-
-
-def matching_candidate(sign: SceneSign, candidates: Sequence[Candidate]) -> Candidate | None:
-    """The best candidate whose centre lies within ``max(3, 0.35 r)`` px of the sign's centre."""
-    x, y = sign.centre_px
-    tolerance = max(3.0, 0.35 * sign.radius_px)
-    return next((c for c in candidates if math.hypot(c.x_px - x, c.y_px - y) <= tolerance),
-                None)
-
-
-def count_false_limits(signs: Sequence[SceneSign], candidates: Sequence[Candidate],
-                       classifications: Sequence[Classification]) -> int:
-    """Candidates read as a limit that lie on no speed-limit sign of that value."""
-    false_limits = 0
-    for candidate, classification in zip(candidates, classifications):
-        if classification.limit_kmh is None:
-            continue
-        on_signs = [sign for sign in signs if matching_candidate(sign, [candidate])]
-        if not any(sign.limit_kmh == classification.limit_kmh for sign in on_signs):
-            false_limits += 1
-    return false_limits
-
-
-def is_found(sign: SceneSign, candidates: Sequence[Candidate]) -> bool:
-    """True when a candidate centre lies within ``max(3, 0.35 r)`` px of the sign's centre."""
-    return matching_candidate(sign, candidates) is not None
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -197,10 +109,7 @@ def run(args: argparse.Namespace) -> int:
     directory: Path = args.directory
     truth = read_gtsdb_truth(directory / 'gt.txt')
     image_dir = directory / 'images'
-    if not image_dir.is_dir():
-        raise TruthFileError(f'{directory} has no images/ folder')
-    files = sorted(path.name for path in image_dir.iterdir()
-                   if path.suffix.lower() in ('.jpg', '.jpeg', '.png', '.ppm'))
+    files = scene_image_files(directory)
     if args.limit > 0:
         files = files[:args.limit]
     if not files:
@@ -251,10 +160,7 @@ def run(args: argparse.Namespace) -> int:
                     continue
                 match = matching_candidate(sign, candidates)
                 hit = match is not None
-                recognized += any(
-                    classification.limit_kmh == sign.limit_kmh
-                    and matching_candidate(sign, [candidate]) is not None
-                    for candidate, classification in zip(candidates, classifications))
+                recognized += is_recognized(sign, candidates, classifications)
                 if hit:
                     radius_ratios.append(match.radius_px / sign.radius_px)
                 signs += 1

@@ -9,6 +9,11 @@
   as a limit, for the rendered-only classifier, the trained filters, and the trained
   filters with the second opinion, side by side.
 
+Both take ``--scenes SCENE_DIR`` (repeatable): annotated scene folders (GTSDB format:
+``images/`` and ``gt.txt``) whose detector candidates teach the second opinion real
+signs in whole frames and real background (``no_sign``). ``validate`` then also reports
+k folds by scene: each fold's bank never saw that fold's scenes.
+
 With ``--json`` the last line on stdout is ONE JSON object; progress goes to stderr.
 Exit status: 0 on success, 1 when training failed (the reason on stderr), 2 for bad
 usage, 130 when interrupted.
@@ -23,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from speed_sign_detector import __version__
-from speed_sign_detector.config import ClassifierConfig, load_yaml
+from speed_sign_detector.config import ClassifierConfig, DetectorConfig, PipelineConfig, load_yaml
 from speed_sign_detector.errors import SpeedSignError
 from speed_sign_detector.recognition.trained_bank import save_trained_bank
 from speed_sign_detector.recognition.training import (
@@ -81,6 +86,14 @@ def build_parser() -> argparse.ArgumentParser:
                         help='rendered, degraded crops of every sign kind the package draws '
                         'added to the second opinion\'s training (values without real '
                         'examples: 5, 10, 40, 90, 110, 130 km/h)')
+    common.add_argument('--scenes', type=Path, action='append', default=[],
+                        metavar='SCENE_DIR', help='annotated scene folder (GTSDB format: '
+                        'images/ and gt.txt) to learn real signs and background from; '
+                        'repeatable')
+    common.add_argument('--scene-copies', type=int, default=_DEFAULTS.scene_copies,
+                        help='degraded copies of each example cut from the scenes')
+    common.add_argument('--backend', choices=('auto', 'gl', 'numpy'), default='auto',
+                        help='detector backend that finds the candidates in the scenes')
     common.add_argument('--no-second-opinion', action='store_true',
                         help='train the composite filters only')
     common.add_argument('--seed', type=int, default=_DEFAULTS.seed)
@@ -103,8 +116,10 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _configs(args: argparse.Namespace) -> tuple[ClassifierConfig, TrainingConfig]:
-    classifier = load_yaml(args.config).classifier if args.config else ClassifierConfig()
+def _configs(args: argparse.Namespace
+             ) -> tuple[ClassifierConfig, TrainingConfig, DetectorConfig]:
+    pipeline = load_yaml(args.config) if args.config else PipelineConfig()
+    classifier = pipeline.classifier
     min_lead = MIN_LEAD_OF_MODEL[args.model] if args.min_lead is None else args.min_lead
     try:
         training = TrainingConfig(model=args.model, ridge=args.ridge,
@@ -113,10 +128,11 @@ def _configs(args: argparse.Namespace) -> tuple[ClassifierConfig, TrainingConfig
                                   min_lead=min_lead, augmented_copies=args.augmented_copies,
                                   examples_per_class=args.examples_per_class,
                                   rendered_per_kind=args.rendered_per_kind,
+                                  scene_copies=args.scene_copies,
                                   second_opinion=not args.no_second_opinion, seed=args.seed)
     except ValueError as err:
         raise SpeedSignError(f'invalid training setting: {err}') from err
-    return classifier, training
+    return classifier, training, pipeline.detector
 
 
 def _bar(args: argparse.Namespace, description: str) -> Any:
@@ -130,10 +146,11 @@ def _bar(args: argparse.Namespace, description: str) -> Any:
 
 
 def _run_build(args: argparse.Namespace) -> int:
-    classifier_config, training = _configs(args)
+    classifier_config, training, detector_config = _configs(args)
     progress = _bar(args, 'locating signs')
     try:
-        bank = train_bank(args.folders, classifier_config, training, progress)
+        bank = train_bank(args.folders, classifier_config, training, progress, args.scenes,
+                          detector_config, args.backend)
     finally:
         progress.close()
     try:
@@ -144,10 +161,13 @@ def _run_build(args: argparse.Namespace) -> int:
     record = bank.provenance
     summary = {'bank_file': str(args.out), 'bytes': size, 'crops': record['crops'],
                'located': record['located'], 'counts_per_class': record['counts_per_class'],
-               'unreadable': record['unreadable']}
+               'scene_examples': record['scene_examples'], 'unreadable': record['unreadable']}
     print(f'wrote {args.out} ({size / 1e6:.2f} MB) from {record["crops"]} crops '
           f'({record["located"]} located): ' + ', '.join(
               f'{label} {count}' for label, count in record['counts_per_class'].items()))
+    if record['scene_examples']:
+        print('scene examples (with copies): ' + ', '.join(
+            f'{label} {count}' for label, count in record['scene_examples'].items()))
     for line in record['unreadable']:
         print(f'skipped unreadable crop: {line}')
     if args.json:
@@ -163,10 +183,11 @@ def _run_validate(args: argparse.Namespace) -> int:
     if args.folds < 2:
         print('speed_sign_train validate: error: --folds must be >= 2', file=sys.stderr)
         return 2
-    classifier_config, training = _configs(args)
+    classifier_config, training, detector_config = _configs(args)
     progress = _bar(args, 'validating')
     try:
-        report = cross_validate(args.folders, args.folds, classifier_config, training, progress)
+        report = cross_validate(args.folders, args.folds, classifier_config, training, progress,
+                                args.scenes, detector_config, args.backend)
     finally:
         progress.close()
     print(f'{args.folds}-fold validation split by track, {report["crops"]} crops')
@@ -189,6 +210,12 @@ def _run_validate(args: argparse.Namespace) -> int:
     print(f'{"fold accuracy":>20} ' + ' '.join(
         f'{report["accuracy_mean"][v]:>21.4f} +- {report["accuracy_std"][v]:.4f}'
         for v in VARIANTS))
+    if 'scenes' in report:
+        scenes = report['scenes']
+        print(f'{args.folds}-fold validation split by scene ({scenes["frames"]} frames, trained '
+              f'second opinion): {scenes["recognized"]}/{scenes["signs"]} limit signs '
+              f'recognized ({scenes["recognition_recall"]:.3f}), {scenes["false_limits"]} '
+              f'false limits ({scenes["false_limits_per_frame"]:.4f} per frame)')
     if args.json:
         print(json.dumps(report, sort_keys=True))
     return 1 if report['unreadable'] else 0
