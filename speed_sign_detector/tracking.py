@@ -7,8 +7,9 @@ is nearest (within ``association_radius_factor`` radii, or
 known yet). Each observation votes for its label with its PSR, multiplied by
 ``growth_boost`` when the sign is larger than at the oldest observation still in the
 window (an approaching sign; at 30 fps a sign grows a few per cent per frame, within the
-noise of one frame to the next, so growth is judged over the window), by ``shrink_penalty`` when it is smaller, and by ``rotation_penalty``
-when its in-plane rotation jumps from the previous observation. A track's evidence for
+noise of one frame to the next, so growth is judged over the window), by
+``shrink_penalty`` when it is smaller, and by ``rotation_penalty`` when its in-plane
+rotation jumps from the previous observation. A track's evidence for
 a label is the sum of its votes inside the window (``window_frames`` frames and
 ``window_s`` seconds of message time, whichever is shorter): an artifact that stays the
 same size for ever never gathers more than a window of unboosted votes. A limit is

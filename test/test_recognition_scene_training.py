@@ -141,7 +141,7 @@ def test_scene_cross_validation_answers_every_scene_with_a_bank_that_never_saw_i
     examples = read_scene_examples(scenes, classifier, COPIES)
     trained_on: list[set[str]] = []
 
-    def train(kept: SceneExamples) -> TrainedBank:  # the real training, recording what each fold saw
+    def train(kept: SceneExamples) -> TrainedBank:  # real training; records what it saw
         trained_on.append(set(kept.scenes))
         return train_from_located(located, TRAINING, scenes=kept)
 
@@ -154,6 +154,8 @@ def test_scene_cross_validation_answers_every_scene_with_a_bank_that_never_saw_i
     assert len(report['fold_recall']) == 2
     for fold, seen in enumerate(trained_on):
         assert seen and all(folds[key] != fold for key in seen)
+    with pytest.raises(TrainingDataError, match='cannot validate by scene'):
+        cross_validate_scenes(scenes, examples, len(SCENES) + 1, train, SMALL)
 
 
 def test_train_command_learns_from_scenes_and_reports_a_missing_folder(

@@ -14,6 +14,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from speed_sign_detector.config import ClassifierConfig
+from speed_sign_detector.errors import TrainingDataError
 from speed_sign_detector.recognition.classifier import Classifier
 from speed_sign_detector.recognition.scene_examples import (
     DetectedScene,
@@ -46,13 +47,19 @@ def cross_validate_scenes(scenes: Sequence[DetectedScene], examples: SceneExampl
         ``{'folds', 'frames', 'signs', 'recognized', 'recognition_recall',
         'false_limits', 'false_limits_per_frame', 'fold_recall': [...],
         'fold_false_limits_per_frame': [...]}``.
+
+    Raises:
+        TrainingDataError: fewer scenes than folds.
     """
-    fold_of = scene_folds([scene.key for scene in scenes], folds)
+    try:
+        fold_of = scene_folds([scene.key for scene in scenes], folds)
+    except ValueError as err:
+        raise TrainingDataError(f'cannot validate by scene: {err}') from err
     totals = {'frames': 0, 'signs': 0, 'recognized': 0, 'false_limits': 0}
     fold_recall: list[float] = []
     fold_false: list[float] = []
     for fold in range(folds):
-        kept = examples.subset({key for key, f in fold_of.items() if f != fold})
+        kept = examples.subset({key for key, scene_fold in fold_of.items() if scene_fold != fold})
         classifier = Classifier(classifier_config, train(kept))
         frames = signs = recognized = false_limits = 0
         for scene in scenes:

@@ -15,13 +15,16 @@ Training (:func:`train_bank`):
    down-scaling), so that small, blurred and dim signs are seen in training.
 
 Look-alike classes (round signs that are not limits) train the second opinion's
-``other_sign`` label. Limits with no real examples keep their rendered filters.
+``other_sign`` label. Limits with no real examples keep their rendered filters. Annotated
+scenes (GTSDB format, :mod:`.scene_examples`) add the detector's candidates on real
+frames: whole-frame signs, and real background as ``no_sign``.
 
 Validation (:func:`cross_validate`): k folds by track (a physical sign is never on both
 sides), each fold's bank trained on the other folds, every crop answered by the bank
 that never saw its track; per-class accuracy, wrong-limit and withheld rates, and the
 look-alikes read as a limit, for the rendered-only classifier, the trained filters alone
-and the trained filters with the second opinion, side by side.
+and the trained filters with the second opinion, side by side; with scenes also k folds
+by scene (:mod:`.scene_validation`).
 """
 from __future__ import annotations
 
@@ -286,7 +289,7 @@ def train_from_located(located: LocatedCrops, config: TrainingConfig,
         feature_labels = list(found_labels)
         for _ in range(config.augmented_copies):
             copies = [aligned_patches(degraded(image, rng), jittered(sign, rng)[None])
-                        for image, sign, ok in zip(located.images, located.signs, found) if ok]
+                      for image, sign, ok in zip(located.images, located.signs, found) if ok]
             feature_rows.append(sign_features(np.concatenate(copies)))
             feature_labels += found_labels
         if rendered is not None:
