@@ -41,10 +41,11 @@ live-demo: $(INSTALLED)
 test: $(INSTALLED)
 	$(BIN)/python -m pytest -q
 
-## bank: rebuild the shipped filter bank from ../shared/data (reproducible: fixed seed)
+## bank: rebuild the shipped filter bank from ../shared/data (reproducible: fixed seed, and one
+## BLAS thread, so that the core count does not change the rounding of the networks' training)
 DATA ?= ../shared/data
 bank: $(INSTALLED)
-	$(BIN)/speed_sign_train build speed_sign_detector/recognition/data/default_bank.npz \
+	OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 $(BIN)/speed_sign_train build speed_sign_detector/recognition/data/default_bank.npz \
 		$(DATA)/gtsrb-dev $(DATA)/gtsrb-lookalikes-dev --scenes $(DATA)/gtsdb-dev
 
 ## bench: accuracy and speed against the peers, written to out/bench/
