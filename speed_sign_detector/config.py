@@ -247,11 +247,14 @@ class ClassifierConfig:
     clahe_for_classification: bool = setting(False, 'Classify on the CLAHE-enhanced ROI '
                                              '(else CLAHE serves detection only).')
     crop_framing: str = setting('auto', 'How crops given to classify_crop frame the sign: '
-                                '"margin" (GTSRB: ~10% margin), "tight" (the box is the '
-                                'sign) or "auto" (either: both are tried, the clearer '
-                                'classification wins; as accurate as the right framing on '
-                                'GTSRB crops, at twice the time per crop).',
-                                choices=('auto', 'margin', 'tight'))
+                                '"margin" (GTSRB: 10% margin, at least 5 px), "tight" (the '
+                                'box is the sign), "padded" (10% margin, no least margin) '
+                                'or "auto" (any: margin and tight are tried, the clearer '
+                                'classification wins, and a small crop read as no sign is '
+                                'tried once more as padded, and read where its PSR reaches '
+                                'larger_size_retry_min_psr; as accurate as the right '
+                                'framing on GTSRB crops, at twice the time per crop).',
+                                choices=('auto', 'margin', 'tight', 'padded'))
     bank_file: str = setting('', 'Trained filter bank file (speed_sign_train build): real '
                              'examples in the composite filters and the second opinion. '
                              '"" = the bank shipped with the package, "none" = rendered '

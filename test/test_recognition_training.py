@@ -27,6 +27,7 @@ from speed_sign_detector.recognition.classifier import (
     CorrelationEvidence,
     crop_sign_radius,
 )
+from speed_sign_detector.recognition.crop_framing import padded_fallback_radius
 from speed_sign_detector.recognition.filter_banks import bank_radii, build_banks
 from speed_sign_detector.recognition.labelled_crops import read_crop_folder, track_folds
 from speed_sign_detector.recognition.second_opinion import (
@@ -209,6 +210,47 @@ def test_tight_and_margin_crops(trained: TrainedBank, framing: str) -> None:
     assert crop_sign_radius((48, 48), 'margin') == 19.0
     with pytest.raises(ValueError, match='unknown crop framing'):
         classifier.classify_crop(tight_crop, 'loose')
+
+
+@pytest.mark.parametrize('kind', ['30', '50', '80', '120'])
+def test_small_crop_padded_in_proportion_is_read_by_auto(kind: str) -> None:
+    # a 13 px sign with 2 px around it (a 17 px crop, padded in proportion as some tools
+    # cut boxes): GTSRB's least margin of 5 px makes 'margin' expect a 3.5 px radius, and
+    # 'tight' 8.5 px; the 'padded' fallback of 'auto' looks at 7.1 px
+    crop = crop_of(kind, 13, 2, seed=1)
+    classifier = Classifier(SMALL)
+    assert classifier.classify_crop(crop, 'margin').label == 'no_sign'
+    assert classifier.classify_crop(crop, 'tight').label == 'no_sign'
+    evidence = classifier.crop_evidence(crop, 'auto')
+    assert classifier.decide(crop, evidence, crop=True).label == 'no_sign'  # no fallback
+    padded = classifier.classify_crop(crop, 'padded')
+    assert padded.label == kind
+    assert padded.psr >= SMALL.larger_size_retry_min_psr
+    answer = classifier.classify_crop(crop, 'auto')
+    assert answer == padded
+    assert abs(answer.radius_px - 6.5) < 1.5
+    assert classifier.decide_crop(crop, evidence) == padded
+    # the filters alone, as cross-validation asks them, take the fallback too
+    assert classifier.decide_crop(crop, evidence, use_second_opinion=False).label == kind
+    assert crop_sign_radius(crop.shape, 'padded') == pytest.approx(17 / 1.2 / 2)
+    assert padded_fallback_radius(crop.shape) == pytest.approx(17 / 1.2 / 2)
+    # from about 60 px GTSRB's margin is 10 % too: no fallback to try
+    assert padded_fallback_radius((72, 72)) is None
+    assert crop_sign_radius((72, 72), 'padded') == crop_sign_radius((72, 72), 'margin')
+
+
+@pytest.mark.parametrize('kind', ['80', '120'])
+def test_padded_fallback_needs_a_clear_peak(kind: str) -> None:
+    # a 12 px sign: 'padded' reads it, but below larger_size_retry_min_psr, and 'auto'
+    # withholds it (a second look at another size needs clearer evidence)
+    crop = crop_of(kind, 12, 2, seed=1)
+    classifier = Classifier(SMALL)
+    padded = classifier.classify_crop(crop, 'padded')
+    assert padded.label == kind
+    assert padded.psr < SMALL.larger_size_retry_min_psr
+    assert classifier.classify_crop(crop, 'auto').label == 'no_sign'
+    looser = Classifier(dataclasses.replace(SMALL, larger_size_retry_min_psr=padded.psr))
+    assert looser.classify_crop(crop, 'auto').label == kind
 
 
 @pytest.mark.parametrize('kind', ['30', '80', '120'])

@@ -31,7 +31,6 @@ import logging
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -42,6 +41,19 @@ from speed_sign_detector.recognition.candidate_evidence import (
     CorrelationEvidence,
     EvidenceSearch,
     NoSignFound,
+)
+from speed_sign_detector.recognition.classification import (  # noqa: F401 (re-exported)
+    LABEL_END_OF_LIMIT,
+    LABEL_NO_SIGN,
+    LABEL_OTHER_SIGN,
+    Classification,
+    label_of_class,
+)
+from speed_sign_detector.recognition.crop_framing import (  # noqa: F401 (re-exported)
+    AUTO_FRAMINGS,
+    CROP_FRAMINGS,
+    crop_sign_radius,
+    padded_fallback_radius,
 )
 from speed_sign_detector.recognition.filter_banks import (  # noqa: F401 (re-exported)
     CLASS_TEMPLATES,
@@ -62,54 +74,7 @@ from speed_sign_detector.recognition.trained_bank import (
     resolve_bank_file,
 )
 
-#: Labels that are not a speed limit.
-LABEL_END_OF_LIMIT = 'end_of_limit'
-LABEL_OTHER_SIGN = 'other_sign'
-LABEL_NO_SIGN = 'no_sign'
-
-
-@dataclass(frozen=True)
-class Classification:
-    """What the classifier says about one candidate or crop.
-
-    Attributes:
-        label: the limit as a string of its km/h value (``'30'``), or one of
-            ``'end_of_limit'``, ``'other_sign'``, ``'no_sign'``.
-        limit_kmh: the speed limit in km/h, or ``None`` when the label is not a limit.
-        psr: peak-to-sidelobe ratio of the winning class (dimensionless): the mean of
-            its ``class_score_top`` best filters (sizes x in-plane rotations).
-        radius_px: the sign's radius (size of the winning class's best filter), pixels.
-        rotation_deg: in-plane rotation of the winning class's best filter, degrees
-            (counter-clockwise).
-        margin: PSR of the winner minus PSR of the best class with a different label.
-        x_px, y_px: the sign's centre as the best filter's correlation peak placed it,
-            frame pixels (crop pixels for :meth:`Classifier.classify_crop`).
-    """
-
-    label: str
-    limit_kmh: int | None
-    psr: float
-    radius_px: float
-    rotation_deg: float
-    margin: float
-    x_px: float
-    y_px: float
-
-    @property
-    def is_limit(self) -> bool:
-        """True when the answer is a speed limit."""
-        return self.limit_kmh is not None
-
 _LOG = logging.getLogger(__name__)
-
-
-def _label_of(class_name: str) -> str:
-    if class_name.isdigit():
-        return class_name
-    if class_name == 'end_of_limit':
-        return LABEL_END_OF_LIMIT
-    return LABEL_OTHER_SIGN
-
 
 
 class Classifier:
@@ -181,27 +146,40 @@ class Classifier:
                 2-D uint8 array.
         """
         gray = _check_gray(gray, 'gray')
-        scale = self.config.candidate_radius_scale
-        answers = list(self._classify_at(
-            gray, [(c.x_px, c.y_px, c.radius_px * scale) for c in candidates]))
+        answers = list(self._classify_at(gray, self.candidate_positions(candidates)))
         # large signs whose candidate radius is the inner ring's or the digits': once
         # more at a larger size where the first answer was "no sign"
-        factor = self.config.larger_size_retry_factor
         retried = [index for index, (candidate, answer) in enumerate(zip(candidates, answers))
-                   if answer.label == LABEL_NO_SIGN
-                   and candidate.radius_px >= self.config.larger_size_retry_min_radius_px]
+                   if answer.label == LABEL_NO_SIGN and self.may_retry_larger(candidate)]
         retried = sorted(retried, key=lambda i: -candidates[i].radius_px)[
             :self.config.larger_size_retry_max_candidates]
-        if factor > 1.0 and retried:
-            second = self._classify_at(gray, [
-                (candidates[i].x_px, candidates[i].y_px,
-                 candidates[i].radius_px * scale * factor) for i in retried],
+        if retried:
+            second = self._classify_at(
+                gray, self.candidate_positions([candidates[i] for i in retried], retry=True),
                 self.config.larger_size_retry_min_detection_psr)
             for index, answer in zip(retried, second):
                 if (answer.label != LABEL_NO_SIGN
                         and answer.psr >= self.config.larger_size_retry_min_psr):
                     answers[index] = answer
         return tuple(answers)
+
+    def candidate_positions(self, candidates: Sequence[Candidate], retry: bool = False
+                            ) -> list[tuple[float, float, float]]:
+        """The (x, y, radius) positions, pixels, at which :meth:`classify` correlates
+        candidates: each at its radius times ``candidate_radius_scale``, or with
+        ``retry`` at the larger-size retry's radius (``larger_size_retry_factor`` times
+        that)."""
+        scale = self.config.candidate_radius_scale
+        if retry:  # the products in the order classify has always formed them
+            factor = self.config.larger_size_retry_factor
+            return [(c.x_px, c.y_px, c.radius_px * scale * factor) for c in candidates]
+        return [(c.x_px, c.y_px, c.radius_px * scale) for c in candidates]
+
+    def may_retry_larger(self, candidate: Candidate) -> bool:
+        """True when :meth:`classify` tries ``candidate`` once more at a larger size where
+        it reads no sign (the retry is on and the candidate is large enough)."""
+        return (self.config.larger_size_retry_factor > 1.0
+                and candidate.radius_px >= self.config.larger_size_retry_min_radius_px)
 
     def _classify_at(self, gray: np.ndarray, positions: Sequence[tuple[float, float, float]],
                      detection_psr_threshold: float | None = None
@@ -230,12 +208,12 @@ class Classifier:
 
         Args:
             crop: (h, w) uint8 gray crop.
-            framing: how the crop frames the sign (default ``config.crop_framing``):
-                ``'margin'`` as GTSRB crops do (a margin of 10% of the sign's size but at
-                least 5 pixels on each side), ``'tight'`` (the box is the sign), or
-                ``'auto'`` (either: both are tried, and the one whose best classification
-                filter matches more clearly wins). The detection filters then find the
-                exact size and position.
+            framing: how the crop frames the sign (default ``config.crop_framing``; see
+                :mod:`.crop_framing`): ``'margin'`` as GTSRB crops do (a margin of 10% of
+                the sign's size but at least 5 pixels on each side), ``'tight'`` (the box
+                is the sign), ``'padded'`` (a 10% margin, no least margin), or
+                ``'auto'`` (any: :meth:`crop_evidence`, then :meth:`decide_crop`). The
+                detection filters then find the exact size and position.
 
         Returns:
             The classification; ``x_px``/``y_px`` are crop pixels. A crop too small for
@@ -246,23 +224,58 @@ class Classifier:
                 unknown framing.
         """
         crop = _check_gray(crop, 'crop')
-        return self.decide(crop, self.crop_evidence(crop, framing), crop=True)
+        return self.decide_crop(crop, self.crop_evidence(crop, framing), framing)
 
     def crop_evidence(self, crop: np.ndarray, framing: str | None = None
                       ) -> CorrelationEvidence | Classification:
         """:meth:`evidence_at` for a crop framed as :meth:`classify_crop` takes it; for
-        ``'auto'`` framing both framings are tried and the one whose best classification
-        filter matches more clearly (higher PSR) wins. (The detection filters' PSR is a
-        worse judge: a filter larger than the sign of a margin crop often finds its ring
-        more clearly, and the classification at that size suffers.)"""
+        ``'auto'`` framing the ``'margin'`` and ``'tight'`` framings are tried and the one
+        whose best classification filter matches more clearly (higher PSR) wins. (The
+        detection filters' PSR is a worse judge: a filter larger than the sign of a margin
+        crop often finds its ring more clearly, and the classification at that size
+        suffers.)"""
         crop = _check_gray(crop, 'crop')
         height, width = crop.shape
         framing = framing or self.config.crop_framing
-        framings = ('margin', 'tight') if framing == 'auto' else (framing,)
+        framings = AUTO_FRAMINGS if framing == 'auto' else (framing,)
         found = self.evidence_for_candidates(
             crop, [(width / 2.0, height / 2.0, crop_sign_radius(crop.shape, name))
                    for name in framings])
         return max(found, key=_classification_psr)  # the first of equals wins
+
+    def decide_crop(self, crop: np.ndarray, evidence: CorrelationEvidence | Classification,
+                    framing: str | None = None, use_second_opinion: bool = True
+                    ) -> Classification:
+        """The answer for a crop from its :meth:`crop_evidence` (as :meth:`decide` with
+        ``crop=True``). With ``'auto'`` framing, a small crop answered "no sign" is
+        correlated once more at its ``'padded'`` radius (a 10% margin without GTSRB's
+        least 5 pixels, as tools that pad boxes in proportion cut them), and that answer
+        stands where it names a sign with a PSR of at least
+        ``larger_size_retry_min_psr``.
+
+        Args:
+            crop: (h, w) uint8 gray crop.
+            evidence: :meth:`crop_evidence`'s result for it.
+            framing: the framing ``evidence`` was found with (default
+                ``config.crop_framing``).
+            use_second_opinion: ``False`` decides by the correlation filters alone.
+        """
+        answer = self.decide(crop, evidence, use_second_opinion, crop=True)
+        if answer.label != LABEL_NO_SIGN or (framing or self.config.crop_framing) != 'auto':
+            return answer
+        radius = padded_fallback_radius(crop.shape)
+        if radius is None:
+            return answer
+        height, width = crop.shape
+        (padded,) = self.evidence_for_candidates(crop, [(width / 2.0, height / 2.0, radius)])
+        second = self.decide(crop, padded, use_second_opinion, crop=True)
+        # a second look at another size needs clearer evidence, as the larger-size retry
+        # does (at PSR 8 a dark GTSRB track of 60s, framed with GTSRB's margin, was read
+        # as 80 at the padded size)
+        if (second.label != LABEL_NO_SIGN
+                and second.psr >= self.config.larger_size_retry_min_psr):
+            return second
+        return answer
 
     def decide(self, gray: np.ndarray, evidence: CorrelationEvidence | Classification,
                use_second_opinion: bool = True, crop: bool = False) -> Classification:
@@ -347,7 +360,7 @@ class Classifier:
         border (not for a ``crop``). ``features``: the sign's (FEATURE_SIZE,)
         second-opinion features when already computed."""
         config = self.config
-        labels = [_label_of(name) for name, _ in evidence.ranked]
+        labels = [label_of_class(name) for name, _ in evidence.ranked]
         label = labels[0]
         frame_x, frame_y, size_radius = evidence.x_px, evidence.y_px, evidence.radius_px
         roll = evidence.rotation_deg
@@ -384,26 +397,6 @@ class Classifier:
 def _classification_psr(found: CorrelationEvidence | Classification) -> float:
     """The leading classification PSR of evidence; -inf where no sign was found."""
     return found.ranked[0][1] if isinstance(found, CorrelationEvidence) else -math.inf
-
-
-#: Crop framings :meth:`Classifier.classify_crop` accepts.
-CROP_FRAMINGS: tuple[str, ...] = ('auto', 'margin', 'tight')
-
-
-def crop_sign_radius(shape: tuple[int, ...], framing: str) -> float:
-    """The sign radius to search around for a crop of ``shape`` (h, w), pixels.
-
-    ``'margin'``: GTSRB framing, a margin of 10% of the sign's size but at least 5 pixels
-    each side; ``'tight'``: the sign fills the box. (``'auto'`` tries both:
-    :meth:`Classifier.crop_evidence`.)
-    """
-    if framing not in CROP_FRAMINGS or framing == 'auto':
-        raise ClassifierInputError(f'unknown crop framing {framing!r}; expected one of '
-                                   f'{", ".join(CROP_FRAMINGS)}')
-    side = float(min(shape[0], shape[1]))
-    if framing == 'tight':
-        return side / 2.0
-    return (min(side / 1.2, side - 10.0) if side > 10.0 else side / 1.2) / 2.0
 
 
 def _check_gray(image: np.ndarray, name: str) -> np.ndarray:

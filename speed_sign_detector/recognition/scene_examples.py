@@ -33,7 +33,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from speed_sign_detector.config import ClassifierConfig, DetectorConfig
+from speed_sign_detector.config import DetectorConfig
 from speed_sign_detector.detection.candidates import Candidate
 from speed_sign_detector.detection.detector import Detector
 from speed_sign_detector.errors import InvalidFrameError, TrainingDataError, TruthFileError
@@ -122,18 +122,14 @@ def scene_label(signs: Sequence[SceneSign], x_px: float, y_px: float, radius_px:
     return GTSRB_CLASS_NAMES.get(sign.class_id, 'other_sign')
 
 
-def classification_positions(candidates: Sequence[Candidate], config: ClassifierConfig
+def classification_positions(candidates: Sequence[Candidate], classifier: Classifier
                              ) -> list[tuple[float, float, float]]:
     """The (x, y, radius) positions, pixels, at which :meth:`Classifier.classify` may
     correlate the candidates: each at its scaled radius, and the large ones also at the
     larger-size retry's radius."""
-    scale = config.candidate_radius_scale
-    positions = [(c.x_px, c.y_px, c.radius_px * scale) for c in candidates]
-    if config.larger_size_retry_factor > 1.0:
-        positions += [(c.x_px, c.y_px, c.radius_px * scale * config.larger_size_retry_factor)
-                      for c in candidates
-                      if c.radius_px >= config.larger_size_retry_min_radius_px]
-    return positions
+    return (classifier.candidate_positions(candidates)
+            + classifier.candidate_positions(
+                [c for c in candidates if classifier.may_retry_larger(c)], retry=True))
 
 
 def scene_examples_of_image(gray: np.ndarray, signs: Sequence[SceneSign],
@@ -148,7 +144,7 @@ def scene_examples_of_image(gray: np.ndarray, signs: Sequence[SceneSign],
     """
     labels: list[str] = []
     features: list[np.ndarray] = []
-    positions = classification_positions(candidates, classifier.config)
+    positions = classification_positions(candidates, classifier)
     for evidence in classifier.evidence_for_candidates(gray, positions):
         if not isinstance(evidence, CorrelationEvidence):
             continue

@@ -484,8 +484,8 @@ def cross_validate(folders: Sequence[Path], folds: int = 5,
                                        backend)
     answers: dict[str, list[str]] = {variant: [''] * len(crops) for variant in VARIANTS}
     for index, image in enumerate(images):
-        answers['rendered'][index] = rendered.decide(image, located.evidence[index],
-                                                     crop=True).label
+        answers['rendered'][index] = rendered.decide_crop(image,
+                                                          located.evidence[index]).label
     for fold in range(folds):
         train = fold_of != fold
         bank = train_from_located(located.subset(train), config, rendered=rendered_crops,
@@ -496,10 +496,10 @@ def cross_validate(folders: Sequence[Path], folds: int = 5,
             # correlates with the rendered filters: their evidence stands
             evidence = located.evidence[index] if not bank.class_examples else \
                 trained.crop_evidence(images[index])
-            answers['trained_filters'][index] = trained.decide(
-                images[index], evidence, use_second_opinion=False, crop=True).label
-            answers['trained_filters_second_opinion'][index] = trained.decide(
-                images[index], evidence, crop=True).label
+            answers['trained_filters'][index] = trained.decide_crop(
+                images[index], evidence, use_second_opinion=False).label
+            answers['trained_filters_second_opinion'][index] = trained.decide_crop(
+                images[index], evidence).label
             step(0, 0)
         done += int(train.sum())  # the steps of this fold's training crops
     truths = [crop.label for crop in crops]
