@@ -158,10 +158,18 @@ class Classifier:
                 gray, self.candidate_positions([candidates[i] for i in retried], retry=True),
                 self.config.larger_size_retry_min_detection_psr)
             for index, answer in zip(retried, second):
-                if (answer.label != LABEL_NO_SIGN
-                        and answer.psr >= self.config.larger_size_retry_min_psr):
+                if self._second_look_stands(answer):
                     answers[index] = answer
         return tuple(answers)
+
+    def _second_look_stands(self, answer: Classification) -> bool:
+        """True when an answer from a second look at another size (the larger-size retry
+        of :meth:`classify`, the padded fallback of :meth:`decide_crop`) replaces "no
+        sign": it names a sign with a PSR of at least ``larger_size_retry_min_psr`` (a
+        second look needs clearer evidence: large round clutter matched a limit at PSR
+        9-11, and at PSR 8 a dark GTSRB track of 60s was read as 80 at the padded size)."""
+        return (answer.label != LABEL_NO_SIGN
+                and answer.psr >= self.config.larger_size_retry_min_psr)
 
     def candidate_positions(self, candidates: Sequence[Candidate], retry: bool = False
                             ) -> list[tuple[float, float, float]]:
@@ -269,13 +277,7 @@ class Classifier:
         height, width = crop.shape
         (padded,) = self.evidence_for_candidates(crop, [(width / 2.0, height / 2.0, radius)])
         second = self.decide(crop, padded, use_second_opinion, crop=True)
-        # a second look at another size needs clearer evidence, as the larger-size retry
-        # does (at PSR 8 a dark GTSRB track of 60s, framed with GTSRB's margin, was read
-        # as 80 at the padded size)
-        if (second.label != LABEL_NO_SIGN
-                and second.psr >= self.config.larger_size_retry_min_psr):
-            return second
-        return answer
+        return second if self._second_look_stands(second) else answer
 
     def decide(self, gray: np.ndarray, evidence: CorrelationEvidence | Classification,
                use_second_opinion: bool = True, crop: bool = False) -> Classification:
