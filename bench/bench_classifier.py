@@ -32,18 +32,22 @@ import time
 from collections import Counter, defaultdict
 from pathlib import Path
 
-import cv2
-import numpy as np
+from speed_sign_detector.blas_threads import use_one_blas_thread
 
-from speed_sign_detector.config import ClassifierConfig
-from speed_sign_detector.detection.candidates import Candidate
-from speed_sign_detector.recognition.classifier import CLASS_TEMPLATES, Classifier
-from speed_sign_detector.recognition.templates import (
+use_one_blas_thread()  # as the node does, before numpy loads its BLAS: the node's figures
+
+import cv2  # noqa: E402
+import numpy as np  # noqa: E402
+
+from speed_sign_detector.config import ClassifierConfig  # noqa: E402
+from speed_sign_detector.detection.candidates import Candidate  # noqa: E402
+from speed_sign_detector.recognition.classifier import CLASS_TEMPLATES, Classifier  # noqa: E402
+from speed_sign_detector.recognition.templates import (  # noqa: E402
     GRAY_TEMPLATE_GEOMETRY,
     gray_views,
     render_sign,
 )
-from speed_sign_detector.tools.eval_crops import (
+from speed_sign_detector.tools.eval_crops import (  # noqa: E402
     GTSRB_END_OF_80,
     GTSRB_LIMITS_KMH,
     read_labels,

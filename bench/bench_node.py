@@ -50,12 +50,8 @@ from rclpy.qos import (
 from sensor_msgs.msg import Image, PointCloud2
 from std_msgs.msg import Header, UInt16
 
+from bench_inputs import DDS_PROFILE, PARAMS_FILE, drive_frames
 from speed_sign_detector.ros.messages import image_message
-from speed_sign_detector.synthetic import DriveConfig, SyntheticDrive
-
-PROJECT_ROOT = Path(__file__).resolve().parents[1]
-PARAMS_FILE = PROJECT_ROOT / 'config' / 'speed_sign_detector.yaml'
-DDS_PROFILE = PROJECT_ROOT / 'config' / 'fastdds_large_images.xml'
 TARGET_FPS = 30.0
 TARGET_RSS_MB = 400.0
 
@@ -79,13 +75,6 @@ class RateResult:
     pipeline_total_p50_ms: float
     pipeline_stage_p50_ms: dict[str, float]
     rss_mb: float
-
-
-def drive_frames(width: int, height: int, count: int, seed: int = 0) -> list[np.ndarray]:
-    """The first ``count`` BGR frames of a synthetic drive (signs, distractors, blur)."""
-    drive = SyntheticDrive(DriveConfig(seed=seed, width_px=width, height_px=height,
-                                       duration_s=count / 30.0 + 1.0, fps=30.0))
-    return [drive.frame(index).bgr for index in range(count)]
 
 
 def resident_mb(pid: int) -> float:

@@ -100,7 +100,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--frames', type=int, default=8)
     parser.add_argument('--crops', type=int, default=200)
     parser.add_argument('--lines', type=int, default=18)
-    parser.add_argument('--params', default=str(run_all.bench_node.PARAMS_FILE),
+    parser.add_argument('--params', default=str(run_all.bench_inputs.PARAMS_FILE),
                         help="classifier parameter file, as run_all.py --params")
     args = parser.parse_args(argv)
     if args.stage == 'detector':

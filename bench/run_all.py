@@ -60,34 +60,37 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 
-import cv2
-import numpy as np
+from speed_sign_detector.blas_threads import use_one_blas_thread
+
+use_one_blas_thread()  # as the node does, before numpy loads its BLAS: the node's figures
+
+import cv2  # noqa: E402
+import numpy as np  # noqa: E402
 
 BENCH_DIR = Path(__file__).resolve().parent
 if str(BENCH_DIR) not in sys.path:  # the sibling bench scripts are plain modules
     sys.path.insert(0, str(BENCH_DIR))
 
-import bench_classifier
-import bench_detector
-import bench_node
-import report
+import bench_classifier  # noqa: E402
+import bench_detector  # noqa: E402
+import bench_inputs  # noqa: E402
+import report  # noqa: E402
 
-from speed_sign_detector.config import (
+from speed_sign_detector.config import (  # noqa: E402
     ClassifierConfig,
     DetectorConfig,
     PipelineConfig,
     load_yaml,
     to_parameters,
 )
-from speed_sign_detector.detection.detector import Detector
-from speed_sign_detector.detection.voting_gl import SOFTWARE_RENDERERS
-from speed_sign_detector.detection.voting_numpy import compute_edges
-from speed_sign_detector.errors import SpeedSignError
-from speed_sign_detector.pipeline import FrameResult, OverlappedPipeline, Pipeline
-from speed_sign_detector.recognition.classifier import Classifier
-from speed_sign_detector.ros.node import NODE_NAME
-from speed_sign_detector.scene_truth import SceneSign, read_gtsdb_truth
-from speed_sign_detector.tools.eval_scenes import SIZE_BINS_PX
+from speed_sign_detector.detection.detector import Detector  # noqa: E402
+from speed_sign_detector.detection.voting_gl import SOFTWARE_RENDERERS  # noqa: E402
+from speed_sign_detector.detection.voting_numpy import compute_edges  # noqa: E402
+from speed_sign_detector.errors import SpeedSignError  # noqa: E402
+from speed_sign_detector.pipeline import FrameResult, OverlappedPipeline, Pipeline  # noqa: E402
+from speed_sign_detector.recognition.classifier import Classifier  # noqa: E402
+from speed_sign_detector.scene_truth import SceneSign, read_gtsdb_truth  # noqa: E402
+from speed_sign_detector.tools.eval_scenes import SIZE_BINS_PX  # noqa: E402
 
 PROJECT_ROOT = BENCH_DIR.parent
 DATA_DIR = PROJECT_ROOT.parent / 'shared' / 'data'
@@ -169,7 +172,7 @@ class BenchSettings:
     pipeline_frames: int = 90
     node_seconds: float = 8.0
     node_rates_hz: tuple[float, ...] = (10.0, 30.0)
-    pipeline_params: Path | None = bench_node.PARAMS_FILE
+    pipeline_params: Path | None = bench_inputs.PARAMS_FILE
     classifier_config: ClassifierConfig | None = None
     bank_cache: Path = BANK_CACHE
     quick: bool = False
@@ -238,8 +241,8 @@ def detector_methods(config: DetectorConfig) -> tuple[dict[str, bench_detector.M
                                                       list[Detector]]:
     """Every detector method by name, and our Detector objects (to close).
 
-    ``gl`` is the config as given (``vote_method='auto'`` picks scatter on a software
-    renderer, raster on a GPU); ``gl_raster`` or ``gl_scatter`` is the other vote method.
+    ``gl`` is the config as given (``vote_method='auto'`` picks scatter); ``gl_raster``
+    or ``gl_scatter`` is the other vote method.
     """
     gl = Detector(config, backend='gl')
     other_method = 'raster' if gl.vote_method == 'scatter' else 'scatter'
@@ -415,7 +418,7 @@ def classifier_stage(settings: BenchSettings) -> dict[str, object]:
 def pipeline_stage(settings: BenchSettings) -> dict[str, object]:
     """Pipeline fps and per-frame latency at 640x480 on a synthetic drive."""
     frames = [cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
-              for bgr in bench_node.drive_frames(640, 480, settings.pipeline_frames + 2)]
+              for bgr in bench_inputs.drive_frames(640, 480, settings.pipeline_frames + 2)]
     config = pipeline_config(settings)
     with Pipeline(config) as pipeline:
         for index in range(2):  # warm-up (GL resources of this size, FFT plans)
@@ -469,7 +472,10 @@ def node_stage(settings: BenchSettings) -> dict[str, object]:
     The node gets, after its own parameter file, ``node_params.yaml`` (in ``out_dir``)
     holding the pipeline stage's config, so node and pipeline run the same settings.
     """
+    import bench_node  # needs rclpy: imported here so that --skip-node runs without it
     import yaml
+
+    from speed_sign_detector.ros.node import NODE_NAME
 
     params_file = settings.out_dir / 'node_params.yaml'
     params_file.write_text(yaml.safe_dump(
@@ -560,7 +566,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--pipeline-frames', type=int)
     parser.add_argument('--node-seconds', type=float, help='0 = do not run the node')
     parser.add_argument('--skip-node', action='store_true', help='same as --node-seconds 0')
-    parser.add_argument('--params', default=str(bench_node.PARAMS_FILE),
+    parser.add_argument('--params', default=str(bench_inputs.PARAMS_FILE),
                         help="parameter file of the pipeline and classifier stages (the "
                              "node's, which the node stage uses); 'defaults' = PipelineConfig()")
     args = parser.parse_args(argv)

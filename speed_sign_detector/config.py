@@ -126,9 +126,9 @@ class DetectorConfig:
                                'paper: one triangle per edge, additive blending into float '
                                'targets), scatter (a compute pass adds each edge\'s '
                                'trapezoid to integer images with atomics; same votes, '
-                               'bit-reproducible), or auto (scatter on software renderers '
-                               'such as llvmpipe, whose triangle setup runs on one thread; '
-                               'raster on GPUs).', choices=('auto', 'raster', 'scatter'))
+                               'bit-reproducible), or auto (scatter: the faster on every '
+                               'renderer measured, llvmpipe and an NVIDIA H100).',
+                               choices=('auto', 'raster', 'scatter'))
     suppression_factor: float = setting(1.0, 'Non-maximum suppression: a candidate closer '
                                         'than this many voting radii (the larger of the '
                                         'two) to a better one is the same sign and dropped.',

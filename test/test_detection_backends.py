@@ -113,8 +113,8 @@ def test_scatter_votes_are_reproducible(scene: np.ndarray) -> None:
     assert any(not np.array_equal(one, other) for one, other in zip(first, second))
 
 
-def test_auto_vote_method_follows_the_renderer() -> None:
+def test_auto_vote_method_is_scatter_and_explicit_methods_stand() -> None:
     assert resolve_vote_method('auto', 'llvmpipe (LLVM 15.0.6, 256 bits)') == 'scatter'
-    assert resolve_vote_method('auto', 'NVIDIA H100 80GB HBM3/PCIe/SSE2') == 'raster'
+    assert resolve_vote_method('auto', 'NVIDIA H100 80GB HBM3/PCIe/SSE2') == 'scatter'
     assert resolve_vote_method('raster', 'llvmpipe (LLVM 15.0.6, 256 bits)') == 'raster'
     assert resolve_vote_method('scatter', 'NVIDIA H100 80GB HBM3/PCIe/SSE2') == 'scatter'
