@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import importlib
 import json
+import subprocess
 import sys
 from pathlib import Path
 
@@ -101,3 +102,26 @@ def test_classifier_and_pipeline_sections(results: dict) -> None:
     assert pipeline['frames'] == 3 and pipeline['fps'] > 0
     assert {'detect', 'classify', 'track', 'total'} <= set(pipeline['stage_p50_ms'])
     assert pipeline['backend'] in {'gl', 'numpy'}
+
+
+def test_run_all_without_the_node_stage_needs_no_rclpy() -> None:
+    """A machine with the GL stack and no ROS (a lent GPU machine, say) runs
+    ``run_all.py --skip-node``: the module and its sibling scripts load with rclpy and
+    the message packages made unimportable, and it asks for one BLAS thread, as the
+    node does, before numpy loads."""
+    pytest.importorskip('radsym', reason='radsym (setup.py extra "bench") not installed')
+    pytest.importorskip('matplotlib', reason='matplotlib (setup.py extra "bench") not installed')
+    script = (
+        'import os, sys\n'
+        'for name in ("rclpy", "sensor_msgs", "std_msgs", "diagnostic_msgs"):\n'
+        '    sys.modules[name] = None\n'
+        'os.environ.pop("OPENBLAS_NUM_THREADS", None)\n'
+        'os.environ.pop("MKL_NUM_THREADS", None)\n'
+        f'sys.path.insert(0, {str(BENCH_DIR)!r})\n'
+        'import run_all\n'
+        'print(os.environ["OPENBLAS_NUM_THREADS"], "rclpy" in sys.modules '
+        'and sys.modules["rclpy"] is not None)\n')
+    done = subprocess.run([sys.executable, '-c', script], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ['1', 'False']
