@@ -19,7 +19,7 @@ templates alone (``bank_file: none``) are measured in the same run:
 Usage::
 
     python bench/bench_classifier.py [--frames 20] [--data ../shared/data/gtsrb-dev]
-        [--every 4] [--json]
+        [--every 4] [--threads 2] [--json]
 """
 from __future__ import annotations
 
@@ -28,6 +28,7 @@ import json
 import resource
 import statistics
 import sys
+import threading
 import time
 from collections import Counter, defaultdict
 from pathlib import Path
@@ -114,6 +115,46 @@ def bench_speed(classifier: Classifier, frames: int) -> dict[str, float]:
             'ms_per_frame_best': min(per_frame),
             'ms_per_frame_first_pass': statistics.median(first_pass),
             'cpu_ms_per_candidate': cpu_ms / (7.0 * frames)}
+
+
+def bench_threads(config: ClassifierConfig, frames: int, threads: int) -> dict[str, float]:
+    """How much of the classifier runs in parallel: ``threads`` classifiers (one each:
+    a classifier is used by one thread at a time) classify the same synthetic frames
+    at once, after each thread's warm-up pass.
+
+    Returns:
+        ``ms_per_frame_alone`` (one thread, median), ``ms_per_frame_together`` (median
+        over every thread's frames) and ``throughput_ratio``: frames per second with the
+        threads together over frames per second alone. ``threads`` means that no part of
+        the classifier holds the GIL (given that many free cores); 1 means that all of it
+        does. The node runs recognition beside its executor and detection threads, so
+        what holds the GIL here slows recognition there.
+    """
+    scenes = [synthetic_frame(seed) for seed in range(frames)]
+    classifiers = [Classifier(config) for _ in range(threads)]
+    timings: list[list[float]] = [[] for _ in range(threads)]
+
+    def classify_all(index: int) -> None:
+        for gray, candidates in scenes:
+            start = time.perf_counter()
+            classifiers[index].classify(gray, candidates)
+            timings[index].append((time.perf_counter() - start) * 1000.0)
+
+    for index in range(threads):  # warm-up: index layouts and FFT plans of every thread
+        classify_all(index)
+    alone = list(timings[0])
+    timings = [[] for _ in range(threads)]
+    workers = [threading.Thread(target=classify_all, args=(index,)) for index in range(threads)]
+    start = time.perf_counter()
+    for worker in workers:
+        worker.start()
+    for worker in workers:
+        worker.join()
+    wall_s = time.perf_counter() - start
+    alone_ms = statistics.median(alone)
+    return {'threads': threads, 'ms_per_frame_alone': alone_ms,
+            'ms_per_frame_together': statistics.median(sum(timings, [])),
+            'throughput_ratio': threads * frames / wall_s / (1000.0 / alone_ms)}
 
 
 def _crop_window(crop: np.ndarray, box: tuple[int, int, int, int], size: int, pad: int
@@ -221,6 +262,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--json', action='store_true', help='JSON object as last stdout line')
     parser.add_argument('--bank-file', default='', help='trained bank to time against the '
                         'rendered-only one ("" = the package\'s default bank)')
+    parser.add_argument('--threads', type=int, default=0, help='also classify the frames in '
+                        'this many threads at once with the trained bank, to see how much '
+                        'of the classifier holds the GIL (0 = skip)')
     args = parser.parse_args(argv)
 
     result: dict[str, object] = {}
@@ -256,6 +300,14 @@ def main(argv: list[str] | None = None) -> int:
             result.update(figures)  # the default bank's figures at the top level
         else:
             result['rendered_bank'] = figures
+    if args.threads > 1:
+        together = bench_threads(ClassifierConfig(cache_dir='', bank_file=args.bank_file),
+                                 args.frames, args.threads)
+        result['threads'] = together
+        print(f"{args.threads} threads at once: {together['ms_per_frame_together']:.1f} "
+              f"ms/frame each against {together['ms_per_frame_alone']:.1f} alone; throughput "
+              f"{together['throughput_ratio']:.2f}x one thread's ({args.threads}x = nothing "
+              f"holds the GIL, 1x = everything does)", file=sys.stderr)
     if args.json:
         print(json.dumps(result))
     return 0

@@ -125,3 +125,19 @@ def test_run_all_without_the_node_stage_needs_no_rclpy() -> None:
                           timeout=120)
     assert done.returncode == 0, done.stderr
     assert done.stdout.split() == ['1', 'False']
+
+
+def test_classifier_threads_bench_reports_both_timings(tmp_path: Path) -> None:
+    """``bench_classifier.py --threads``: two classifiers on two threads classify the
+    same frame; the figures come back for both and the throughput ratio is positive
+    (no timing threshold: the machine is shared)."""
+    sys.path.insert(0, str(BENCH_DIR))
+    try:
+        bench_classifier = importlib.import_module('bench_classifier')
+    finally:
+        sys.path.remove(str(BENCH_DIR))
+    figures = bench_classifier.bench_threads(
+        ClassifierConfig(cache_dir=str(tmp_path), max_radius_px=24.0), frames=1, threads=2)
+    assert figures['threads'] == 2
+    assert figures['ms_per_frame_alone'] > 0 and figures['ms_per_frame_together'] > 0
+    assert figures['throughput_ratio'] > 0
