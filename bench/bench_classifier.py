@@ -120,7 +120,8 @@ def bench_speed(classifier: Classifier, frames: int) -> dict[str, float]:
 def bench_threads(config: ClassifierConfig, frames: int, threads: int) -> dict[str, float]:
     """How much of the classifier runs in parallel: ``threads`` classifiers (one each:
     a classifier is used by one thread at a time) classify the same synthetic frames
-    at once, after each thread's warm-up pass.
+    at once, against one of them alone; both timed after each classifier's warm-up pass
+    (which fills its caches, as :func:`bench_speed`'s first pass does).
 
     Returns:
         ``ms_per_frame_alone`` (one thread, median), ``ms_per_frame_together`` (median
@@ -142,7 +143,9 @@ def bench_threads(config: ClassifierConfig, frames: int, threads: int) -> dict[s
 
     for index in range(threads):  # warm-up: index layouts and FFT plans of every thread
         classify_all(index)
-    alone = list(timings[0])
+    timings = [[] for _ in range(threads)]
+    classify_all(0)  # one thread alone, warm (the first pass above filled the caches)
+    alone = timings[0]
     timings = [[] for _ in range(threads)]
     workers = [threading.Thread(target=classify_all, args=(index,)) for index in range(threads)]
     start = time.perf_counter()
