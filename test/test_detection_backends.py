@@ -114,7 +114,6 @@ def test_scatter_votes_are_reproducible(scene: np.ndarray) -> None:
 
 
 def test_auto_vote_method_is_scatter_and_explicit_methods_stand() -> None:
-    assert resolve_vote_method('auto', 'llvmpipe (LLVM 15.0.6, 256 bits)') == 'scatter'
-    assert resolve_vote_method('auto', 'NVIDIA H100 80GB HBM3/PCIe/SSE2') == 'scatter'
-    assert resolve_vote_method('raster', 'llvmpipe (LLVM 15.0.6, 256 bits)') == 'raster'
-    assert resolve_vote_method('scatter', 'NVIDIA H100 80GB HBM3/PCIe/SSE2') == 'scatter'
+    assert resolve_vote_method('auto') == 'scatter'
+    assert resolve_vote_method('raster') == 'raster'
+    assert resolve_vote_method('scatter') == 'scatter'

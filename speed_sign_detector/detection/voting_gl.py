@@ -626,7 +626,7 @@ class GLVoter:
             raise
         try:
             self.renderer = str(self._ctx.info['GL_RENDERER'])
-            self.vote_method = resolve_vote_method(config.vote_method, self.renderer)
+            self.vote_method = resolve_vote_method(config.vote_method)
             scatter = self.vote_method == 'scatter'
             self._pyramid = self._ctx.compute_shader(_PYRAMID_SRC)
             self._downsample = self._ctx.compute_shader(_DOWNSAMPLE_SRC)
@@ -919,14 +919,14 @@ _EMPTY_DISPATCH = np.array([0, 1, 1], np.uint32).tobytes()
 _EMPTY_RIDGES = np.array([0, 1, 1, 0], np.uint32).tobytes()  # dispatch (x, y, z), count
 
 
-def resolve_vote_method(vote_method: str, renderer: str) -> str:
-    """``'raster'`` or ``'scatter'`` for a config's ``vote_method`` on a GL renderer.
+def resolve_vote_method(vote_method: str) -> str:
+    """``'raster'`` or ``'scatter'`` for a config's ``vote_method``.
 
     ``'auto'`` is scatter on every renderer measured so far: on llvmpipe, whose triangle
     setup runs on one thread, and on an NVIDIA H100 (2026-11-24, bench/RESULTS.md), where
     the detector took 2.1 ms against raster's 5.2 ms at 640x480 and 12.5 against 34.4 ms at
-    1920x1080, with the same votes and recall. ``renderer`` is kept in the signature so
-    that a renderer measured to favour raster can be named here.
+    1920x1080, with the same votes and recall. (It used to depend on the renderer; should a
+    renderer be measured to favour raster, the choice would take the renderer again.)
     """
     if vote_method in VOTE_METHODS:
         return vote_method
