@@ -196,20 +196,22 @@ class Classifier:
         radius as the size search takes it), without the larger-size retry; see
         :meth:`evidence_for_candidates` for ``detection_psr_threshold``."""
         found = self.evidence_for_candidates(gray, positions, detection_psr_threshold)
-        # the second opinion's features of every sign it will be asked about, in one call
+        # the second opinion's scores of every sign it will be asked about, in one call
+        # (one pass over its weights for all of them, not one per sign)
         opinion = self.trained_bank.second_opinion
         asked = [index for index, evidence in enumerate(found)
                  if isinstance(evidence, CorrelationEvidence)
                  and not self._withheld_by_filters(gray.shape, evidence, opinion)]
-        features: list[np.ndarray | None] = [None] * len(found)
+        scores: list[np.ndarray | None] = [None] * len(found)
         if opinion is not None and asked:
             signs = np.asarray([[found[i].x_px, found[i].y_px, found[i].radius_px]
                                 for i in asked])
-            for index, row in zip(asked, sign_features(aligned_patches(gray, signs))):
-                features[index] = row
+            for index, row in zip(asked, opinion.scores(sign_features(
+                    aligned_patches(gray, signs)))):
+                scores[index] = row
         return tuple(evidence if isinstance(evidence, Classification)
-                     else self._decide(gray, evidence, features=row)
-                     for evidence, row in zip(found, features))
+                     else self._decide(gray, evidence, opinion_scores=row)
+                     for evidence, row in zip(found, scores))
 
     def classify_crop(self, crop: np.ndarray, framing: str | None = None) -> Classification:
         """Classify a crop holding one centred sign.
@@ -354,13 +356,13 @@ class Classifier:
         return cut_px > config.max_cut_fraction * size_radius
 
     def _decide(self, gray: np.ndarray, evidence: CorrelationEvidence,
-                use_second_opinion: bool = True, features: np.ndarray | None = None,
+                use_second_opinion: bool = True, opinion_scores: np.ndarray | None = None,
                 crop: bool = False) -> Classification:
         """The answer from the correlation evidence: the leading class (or the second
         opinion's choice among the leading classes), or "no sign" when the PSR or the lead
         is too small, the second opinion withholds it, or the sign is cut by the frame
-        border (not for a ``crop``). ``features``: the sign's (FEATURE_SIZE,)
-        second-opinion features when already computed."""
+        border (not for a ``crop``). ``opinion_scores``: the second opinion's (C,) scores
+        of the sign when already computed."""
         config = self.config
         labels = [label_of_class(name) for name, _ in evidence.ranked]
         label = labels[0]
@@ -370,10 +372,9 @@ class Classifier:
         top_psr = evidence.ranked[0][1]
         withhold = self._withheld_by_filters(None if crop else gray.shape, evidence, opinion)
         if opinion is not None and not withhold:
-            if features is None:
-                features = sign_features(aligned_patches(
-                    gray, np.asarray([[frame_x, frame_y, size_radius]])))[0]
-            scores = opinion.scores(features[None])[0]
+            scores = opinion_scores if opinion_scores is not None else opinion.scores(
+                sign_features(aligned_patches(gray, np.asarray([[frame_x, frame_y,
+                                                                  size_radius]]))))[0]
             # a weak correlation peak needs a clearer second opinion
             min_lead = self.trained_bank.min_lead if top_psr >= config.psr_threshold else \
                 max(self.trained_bank.min_lead, config.second_opinion_low_psr_lead)
