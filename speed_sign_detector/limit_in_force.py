@@ -120,12 +120,16 @@ def score_time_in_limit(tracks: Sequence[TruthTrack], frame_stamps_s: Sequence[f
         periods = sorted(later - earlier for earlier, later in zip(stamps, stamps[1:]))
         tolerance_s = 0.5 * periods[len(periods) // 2] + 1e-4 if periods else 1e-4
     passings = limit_sign_passings(tracks)
+    # passings are in passing order: each frame finds its place with one bisection
+    # (O((frames + changes) log signs), not a scan of every sign per frame)
+    passed_stamps = [passing.passed_stamp_s for passing in passings]
     change_stamps = [stamp for stamp, _ in limit_changes]
     judged_s = acceptable_s = exact_s = 0.0
     for stamp_s, next_stamp_s in zip(stamps, stamps[1:]):
-        in_force = limit_in_force_kmh(passings, stamp_s, tolerance_s)
-        if in_force is None:
+        passed_count = bisect.bisect_right(passed_stamps, stamp_s + tolerance_s)
+        if not passed_count:
             continue
+        in_force = passings[passed_count - 1].limit_kmh
         change_index = bisect.bisect_right(change_stamps, stamp_s + 1e-9)
         published = limit_changes[change_index - 1][1] if change_index else 0
         duration_s = next_stamp_s - stamp_s
@@ -133,22 +137,23 @@ def score_time_in_limit(tracks: Sequence[TruthTrack], frame_stamps_s: Sequence[f
         if published == in_force:
             exact_s += duration_s
             acceptable_s += duration_s
-        elif published in _announced_kmh(passings, stamp_s, tolerance_s):
+        elif published in _announced_kmh(passings, passed_stamps, passed_count, stamp_s,
+                                         tolerance_s):
             acceptable_s += duration_s
     if judged_s <= 0.0:
         return LimitTimeScore(None, None, 0.0)
     return LimitTimeScore(acceptable_s / judged_s, exact_s / judged_s, judged_s)
 
 
-def _announced_kmh(passings: Sequence[LimitSignPassing], stamp_s: float,
-                   tolerance_s: float) -> set[int]:
+def _announced_kmh(passings: Sequence[LimitSignPassing], passed_stamps: Sequence[float],
+                   passed_count: int, stamp_s: float, tolerance_s: float) -> set[int]:
     """Values of the next signs to be passed (those passed at the earliest upcoming
-    stamp) that are in view at ``stamp_s``; empty when none is."""
-    upcoming = [passing for passing in passings
-                if passing.passed_stamp_s > stamp_s + tolerance_s]
-    if not upcoming:
+    stamp) that are in view at ``stamp_s``; empty when none is. ``passed_count``: how
+    many of the (passing-ordered) ``passings`` are passed by then, ``passed_stamps``
+    their passing stamps."""
+    if passed_count >= len(passings):
         return set()
-    next_stamp_s = upcoming[0].passed_stamp_s
-    return {passing.limit_kmh for passing in upcoming
-            if passing.passed_stamp_s <= next_stamp_s + 1e-9
-            and passing.first_stamp_s <= stamp_s + tolerance_s}
+    next_stamp_s = passed_stamps[passed_count]
+    group_end = bisect.bisect_right(passed_stamps, next_stamp_s + 1e-9, lo=passed_count)
+    return {passing.limit_kmh for passing in passings[passed_count:group_end]
+            if passing.first_stamp_s <= stamp_s + tolerance_s}

@@ -100,3 +100,53 @@ def test_of_signs_passed_together_the_nearest_rules_and_either_may_be_announced(
     assert score.time_in_correct_limit == pytest.approx(1.0)
     # the 80 announced from 2.0 to 3.0 s is not the limit in force (50)
     assert score.time_in_correct_limit_strict == pytest.approx(3.5 / 4.5)
+
+
+def _reference_score(tracks: list, stamps: list[float], changes: list[tuple[float, int]],
+                     tolerance_s: float) -> tuple[float, float, float]:
+    """The module docstring's definitions, read literally: every sign examined at every
+    frame (slow, obviously right)."""
+    passings = limit_sign_passings(tracks)
+    judged = acceptable = exact = 0.0
+    for stamp, following in zip(stamps, stamps[1:]):
+        passed = [p for p in passings if p.passed_stamp_s <= stamp + tolerance_s]
+        if not passed:
+            continue
+        in_force = passed[-1].limit_kmh
+        published = 0
+        for change_stamp, value in changes:
+            if change_stamp <= stamp + 1e-9:
+                published = value
+        upcoming = [p for p in passings if p.passed_stamp_s > stamp + tolerance_s]
+        announced = {p.limit_kmh for p in upcoming
+                     if p.passed_stamp_s <= upcoming[0].passed_stamp_s + 1e-9
+                     and p.first_stamp_s <= stamp + tolerance_s} if upcoming else set()
+        judged += following - stamp
+        exact += (following - stamp) * (published == in_force)
+        acceptable += (following - stamp) * (published == in_force or published in announced)
+    return judged, acceptable, exact
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_time_in_limit_matches_the_literal_definition_on_random_drives(seed: int) -> None:
+    """Many overlapping signs (some passed at the same frame) and random publications:
+    the bisecting implementation gives the literal definition's shares."""
+    import random
+    generator = random.Random(seed)
+    rows: list[TruthRow] = []
+    for track_id in range(1, 41):
+        first_s = round(generator.randrange(0, 90) * 0.1, 6)
+        last_s = round(first_s + generator.randrange(0, 15) * 0.1, 6)
+        limit_kmh = generator.choice([30, 50, 70, 0])
+        kind = str(limit_kmh) if limit_kmh else generator.choice(['end_of_limit_50',
+                                                                  'no_overtaking'])
+        rows += sign(track_id, kind, limit_kmh, first_s, last_s)
+    tracks = group_tracks(sorted(rows, key=lambda row: row.stamp_s))
+    changes = sorted((round(generator.randrange(0, 100) * 0.1, 6),
+                      generator.choice([0, 30, 50, 70])) for _ in range(25))
+    score = score_time_in_limit(tracks, STAMPS_S, changes)
+    judged, acceptable, exact = _reference_score(tracks, STAMPS_S, changes, 0.05 + 1e-4)
+    assert judged > 0.0
+    assert score.judged_s == pytest.approx(judged)
+    assert score.time_in_correct_limit == pytest.approx(acceptable / judged)
+    assert score.time_in_correct_limit_strict == pytest.approx(exact / judged)
