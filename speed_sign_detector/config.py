@@ -315,6 +315,12 @@ class PipelineConfig:
                            'gl, or numpy.', choices=('auto', 'gl', 'numpy'))
     classify: bool = setting(True, 'Run the classifier on the candidates (off: detection '
                              'only).')
+    classifier_process: bool = setting(
+        False, 'Run the classifier in a worker process of its own instead of in this one, '
+        'so that detection and recognition do not take turns with one Python interpreter '
+        '(its GIL). Meant for many-core machines with a GPU, where the node\'s recognition '
+        'thread ran slower than the classifier alone; on 2 cores no gain was measured. '
+        'Costs a second process (its start-up and memory).')
     detector: DetectorConfig = field(default_factory=DetectorConfig)
     classifier: ClassifierConfig = field(default_factory=ClassifierConfig)
     tracker: TrackerConfig = field(default_factory=TrackerConfig)

@@ -47,3 +47,7 @@ class TrainingDataError(SpeedSignError, ValueError):
 
 class BankFileError(ClassifierError):
     """A filter bank file cannot be read: missing, corrupt, or of another format version."""
+
+
+class ClassifierProcessError(ClassifierError):
+    """The classifier's worker process could not start, or exited while it was needed."""

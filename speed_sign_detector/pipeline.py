@@ -22,6 +22,7 @@ from speed_sign_detector.config import PipelineConfig
 from speed_sign_detector.detection.candidates import Candidate
 from speed_sign_detector.detection.detector import Detector
 from speed_sign_detector.recognition.classifier import Classification, Classifier
+from speed_sign_detector.recognition.classifier_process import ClassifierProcess
 from speed_sign_detector.tracking import Tracker, TrackState
 
 LOGGER = logging.getLogger(__name__)
@@ -99,8 +100,7 @@ class Pipeline:
         self.config = config or PipelineConfig()
         self._detector: Detector | None = Detector(self.config.detector,
                                                    backend=self.config.backend)
-        self._classifier: Classifier | None = (Classifier(self.config.classifier)
-                                               if self.config.classify else None)
+        self._classifier = _build_classifier(self.config)
         self._tracker = Tracker(self.config.tracker)
         LOGGER.info('pipeline ready: backend %s (%s), %s voting%s', self.backend_name,
                     self.renderer, self.vote_method,
@@ -192,9 +192,12 @@ class Pipeline:
             detector = Detector(config.detector, backend=config.backend)
             self._live_detector().close()
             self._detector = detector
-        if config.classify != self.config.classify or (
+        if config.classify != self.config.classify \
+                or config.classifier_process != self.config.classifier_process or (
                 config.classify and config.classifier != self.config.classifier):
-            self._classifier = Classifier(config.classifier) if config.classify else None
+            classifier = _build_classifier(config)
+            _close_classifier(self._classifier)
+            self._classifier = classifier
         if config.tracker != self.config.tracker:
             self._tracker.config = config.tracker
         self.config = config
@@ -204,10 +207,13 @@ class Pipeline:
         self._tracker.reset()
 
     def close(self) -> None:
-        """Release the detector's GL context; the pipeline cannot process afterwards."""
+        """Release the detector's GL context (and stop the classifier's process, if it
+        has one); the pipeline cannot process afterwards."""
         if self._detector is not None:
             self._detector.close()
             self._detector = None
+        _close_classifier(self._classifier)
+        self._classifier = None
 
     def _live_detector(self) -> Detector:
         if self._detector is None:
@@ -220,6 +226,21 @@ class Pipeline:
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
                  traceback: TracebackType | None) -> None:
         self.close()
+
+
+def _build_classifier(config: PipelineConfig) -> Classifier | ClassifierProcess | None:
+    """The classifier ``config`` asks for: none, in this process, or in its own."""
+    if not config.classify:
+        return None
+    if config.classifier_process:
+        return ClassifierProcess(config.classifier)
+    return Classifier(config.classifier)
+
+
+def _close_classifier(classifier: Classifier | ClassifierProcess | None) -> None:
+    """Stop a classifier's worker process, where it has one."""
+    if isinstance(classifier, ClassifierProcess):
+        classifier.close()
 
 
 ResultCallback = Callable[[FrameResult, Any], None]

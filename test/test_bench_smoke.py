@@ -141,3 +141,19 @@ def test_classifier_threads_bench_reports_both_timings(tmp_path: Path) -> None:
     assert figures['threads'] == 2
     assert figures['ms_per_frame_alone'] > 0 and figures['ms_per_frame_together'] > 0
     assert figures['throughput_ratio'] > 0
+
+
+def test_stage_contention_bench_reports_every_figure(tmp_path: Path) -> None:
+    """``bench_stage_contention.py``: detection alone and beside a classifying thread and
+    a classifying worker process (a real one); every figure comes back positive (no
+    timing threshold: the machine is shared)."""
+    sys.path.insert(0, str(BENCH_DIR))
+    try:
+        bench = importlib.import_module('bench_stage_contention')
+    finally:
+        sys.path.remove(str(BENCH_DIR))
+    figures = bench.bench_contention(
+        ClassifierConfig(cache_dir=str(tmp_path), max_radius_px=24.0), 'auto', seconds=0.05)
+    for where in ('alone', 'beside_thread', 'beside_process'):
+        assert figures[f'detect_ms_{where}'] > 0
+        assert figures[f'classify_ms_{where}'] > 0

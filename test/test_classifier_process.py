@@ -1,0 +1,150 @@
+"""The classifier in a worker process: the same answers as in this process, errors
+reported (a refused frame, a bad bank file, a killed worker), and the pipeline's
+``classifier_process`` setting start, swap and stop real worker processes."""
+from __future__ import annotations
+
+import dataclasses
+import os
+import signal
+from collections.abc import Iterator
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from speed_sign_detector.config import ClassifierConfig, PipelineConfig
+from speed_sign_detector.detection.candidates import Candidate
+from speed_sign_detector.errors import (
+    BankFileError,
+    ClassifierInputError,
+    ClassifierProcessError,
+)
+from speed_sign_detector.pipeline import Pipeline
+from speed_sign_detector.recognition.classifier import Classifier
+from speed_sign_detector.recognition.classifier_process import ClassifierProcess
+from speed_sign_detector.recognition.templates import render_sign
+
+#: Banks up to radius 30 px only, to keep the module fast (the default goes to 48).
+SMALL_BANKS = ClassifierConfig(max_radius_px=30.0, cache_dir='')
+#: (kind, centre x, centre y, outer radius) of the signs of the test frame.
+SIGNS = (('30', 50.0, 60.0, 22.0), ('80', 130.0, 55.0, 20.0), ('no_overtaking', 210.0, 62.0,
+                                                                 21.0))
+
+
+def _frame() -> tuple[np.ndarray, list[Candidate]]:
+    """A (120, 260) gray frame with three rendered signs on a textured background, and
+    a candidate on each (at about 0.78 of the outer radius, as the detector reports)
+    plus one on the empty background."""
+    rng = np.random.default_rng(3)
+    coarse = rng.uniform(60, 190, (10, 19)).astype(np.float32)
+    frame = cv2.resize(coarse, (260, 120), interpolation=cv2.INTER_CUBIC)
+    candidates = []
+    for kind, x_px, y_px, radius_px in SIGNS:
+        diameter = int(round(2 * radius_px))
+        bgr, alpha = render_sign(kind, diameter)
+        gray = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype(np.float32)
+        left, top = int(round(x_px - diameter / 2)), int(round(y_px - diameter / 2))
+        window = frame[top:top + diameter, left:left + diameter]
+        window[:] = alpha * gray + (1 - alpha) * window
+        candidates.append(Candidate(x_px, y_px, radius_px * 0.78, 1.0))
+    candidates.append(Candidate(240.0, 20.0, 12.0, 0.5))
+    return np.clip(frame, 0, 255).astype(np.uint8), candidates
+
+
+@pytest.fixture(scope='module')
+def config(tmp_path_factory: pytest.TempPathFactory) -> ClassifierConfig:
+    return dataclasses.replace(SMALL_BANKS,
+                               cache_dir=str(tmp_path_factory.mktemp('filter_banks')))
+
+
+@pytest.fixture(scope='module')
+def in_process(config: ClassifierConfig) -> Classifier:
+    return Classifier(config)  # also fills the bank cache the workers read
+
+
+@pytest.fixture()
+def worker(config: ClassifierConfig, in_process: Classifier) -> Iterator[ClassifierProcess]:
+    with ClassifierProcess(config) as process:
+        yield process
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+def test_worker_answers_as_the_classifier_in_this_process(
+        worker: ClassifierProcess, in_process: Classifier) -> None:
+    gray, candidates = _frame()
+    answers = worker.classify(gray, candidates)
+    assert worker.pid is not None and worker.pid != os.getpid()
+    assert answers == in_process.classify(gray, candidates)
+    assert [answer.label for answer in answers[:2]] == ['30', '80']
+    assert answers[2].limit_kmh is None  # the look-alike is no limit
+
+
+def test_refused_frame_raises_the_classifiers_error_and_the_worker_goes_on(
+        worker: ClassifierProcess, in_process: Classifier) -> None:
+    gray, candidates = _frame()
+    pid = worker.pid
+    with pytest.raises(ClassifierInputError, match='uint8'):
+        worker.classify(gray.astype(np.float32), candidates)
+    assert worker.classify(gray, candidates) == in_process.classify(gray, candidates)
+    assert worker.pid == pid
+
+
+def test_killed_worker_is_reported_then_replaced(worker: ClassifierProcess,
+                                                 in_process: Classifier) -> None:
+    gray, candidates = _frame()
+    first = worker.pid
+    assert first is not None
+    os.kill(first, signal.SIGKILL)
+    with pytest.raises(ClassifierProcessError, match='exit code -9'):
+        worker.classify(gray, candidates)
+    assert worker.classify(gray, candidates) == in_process.classify(gray, candidates)
+    assert worker.pid not in (None, first)
+
+
+def test_bad_bank_file_is_raised_by_the_constructor(config: ClassifierConfig,
+                                                    tmp_path: Path) -> None:
+    broken = tmp_path / 'broken.npz'
+    broken.write_bytes(b'not a bank')
+    with pytest.raises(BankFileError, match='broken.npz'):
+        ClassifierProcess(dataclasses.replace(config, bank_file=str(broken)))
+
+
+def test_close_stops_the_worker(config: ClassifierConfig, in_process: Classifier) -> None:
+    process = ClassifierProcess(config)
+    pid = process.pid
+    assert pid is not None and _alive(pid)
+    process.close()
+    assert process.pid is None and not _alive(pid)
+    process.close()  # idempotent
+
+
+def test_pipeline_setting_starts_swaps_and_stops_workers(config: ClassifierConfig,
+                                                         in_process: Classifier) -> None:
+    gray, _ = _frame()
+    settings = PipelineConfig(backend='numpy', classifier=config, classifier_process=True)
+    with Pipeline(dataclasses.replace(settings, classifier_process=False)) as reference:
+        expected = reference.process(gray, 0.0)
+    pipeline = Pipeline(settings)
+    worker = pipeline._classifier
+    assert isinstance(worker, ClassifierProcess)
+    pid = worker.pid
+    assert pid is not None
+    result = pipeline.process(gray, 0.0)
+    assert result.detections == expected.detections
+    pipeline.reconfigure(dataclasses.replace(settings, classifier_process=False))
+    assert isinstance(pipeline._classifier, Classifier) and not _alive(pid)
+    pipeline.reconfigure(settings)
+    worker = pipeline._classifier
+    assert isinstance(worker, ClassifierProcess)
+    pid = worker.pid
+    assert pid is not None and _alive(pid)
+    pipeline.close()
+    assert not _alive(pid)
