@@ -148,3 +148,15 @@ def test_pipeline_setting_starts_swaps_and_stops_workers(config: ClassifierConfi
     assert pid is not None and _alive(pid)
     pipeline.close()
     assert not _alive(pid)
+
+
+def test_interrupt_of_the_process_group_leaves_the_worker_to_its_parent(
+        worker: ClassifierProcess, in_process: Classifier) -> None:
+    """Ctrl+C in a terminal reaches the worker too: it ignores it, and stops only when
+    its parent closes it."""
+    gray, candidates = _frame()
+    pid = worker.pid
+    assert pid is not None
+    os.kill(pid, signal.SIGINT)
+    assert worker.classify(gray, candidates) == in_process.classify(gray, candidates)
+    assert worker.pid == pid

@@ -31,6 +31,7 @@ import logging
 import multiprocessing.connection
 import os
 import pickle
+import signal
 import socket
 import subprocess
 import sys
@@ -210,6 +211,9 @@ class ClassifierProcess:
 def main(argv: Sequence[str]) -> int:
     """The worker's entry point: ``python -m speed_sign_detector.recognition.
     classifier_process FD``, FD the socket to the parent."""
+    # Ctrl+C in a terminal reaches the whole process group: the parent decides when the
+    # worker stops (it closes the socket or sends None), so the worker ignores it
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     with multiprocessing.connection.Connection(int(argv[1])) as connection:
         _serve(connection)
     return 0
