@@ -13,6 +13,7 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -20,6 +21,16 @@ from speed_sign_detector.config import ClassifierConfig
 
 BENCH_DIR = Path(__file__).resolve().parents[1] / 'bench'
 METHODS = {'gl', 'numpy', 'hough_gradient', 'hough_gradient_alt', 'radsym_rsd', 'radsym_frst'}
+
+
+def bench_module(name: str) -> Any:
+    """A script of bench/ imported as a module (bench/ is a folder of scripts, not a
+    package)."""
+    sys.path.insert(0, str(BENCH_DIR))
+    try:
+        return importlib.import_module(name)
+    finally:
+        sys.path.remove(str(BENCH_DIR))
 
 
 @pytest.fixture(scope='module')
@@ -131,12 +142,7 @@ def test_classifier_threads_bench_reports_both_timings(tmp_path: Path) -> None:
     """``bench_classifier.py --threads``: two classifiers on two threads classify the
     same frame; the figures come back for both and the throughput ratio is positive
     (no timing threshold: the machine is shared)."""
-    sys.path.insert(0, str(BENCH_DIR))
-    try:
-        bench_classifier = importlib.import_module('bench_classifier')
-    finally:
-        sys.path.remove(str(BENCH_DIR))
-    figures = bench_classifier.bench_threads(
+    figures = bench_module('bench_classifier').bench_threads(
         ClassifierConfig(cache_dir=str(tmp_path), max_radius_px=24.0), frames=1, threads=2)
     assert figures['threads'] == 2
     assert figures['ms_per_frame_alone'] > 0 and figures['ms_per_frame_together'] > 0
@@ -147,12 +153,7 @@ def test_stage_contention_bench_reports_every_figure(tmp_path: Path) -> None:
     """``bench_stage_contention.py``: detection alone and beside a classifying thread and
     a classifying worker process (a real one); every figure comes back positive (no
     timing threshold: the machine is shared)."""
-    sys.path.insert(0, str(BENCH_DIR))
-    try:
-        bench = importlib.import_module('bench_stage_contention')
-    finally:
-        sys.path.remove(str(BENCH_DIR))
-    figures = bench.bench_contention(
+    figures = bench_module('bench_stage_contention').bench_contention(
         ClassifierConfig(cache_dir=str(tmp_path), max_radius_px=24.0), 'auto', seconds=0.05)
     for where in ('alone', 'beside_thread', 'beside_process'):
         assert figures[f'detect_ms_{where}'] > 0
