@@ -160,3 +160,22 @@ def test_interrupt_of_the_process_group_leaves_the_worker_to_its_parent(
     os.kill(pid, signal.SIGINT)
     assert worker.classify(gray, candidates) == in_process.classify(gray, candidates)
     assert worker.pid == pid
+
+
+def test_hung_worker_is_killed_after_the_answer_timeout_then_replaced(
+        config: ClassifierConfig, in_process: Classifier) -> None:
+    gray, candidates = _frame()
+    with ClassifierProcess(config, answer_timeout_s=1.0) as process:
+        hung = process.pid
+        assert hung is not None
+        os.kill(hung, signal.SIGSTOP)  # as a deadlocked worker: alive, never answering
+        with pytest.raises(ClassifierProcessError, match='did not answer within 1 s'):
+            process.classify(gray, candidates)
+        assert not _alive(hung)
+        assert process.classify(gray, candidates) == in_process.classify(gray, candidates)
+        assert process.pid not in (None, hung)
+
+
+def test_answer_timeout_must_be_positive(config: ClassifierConfig) -> None:
+    with pytest.raises(ValueError, match='answer_timeout_s'):
+        ClassifierProcess(config, answer_timeout_s=0.0)

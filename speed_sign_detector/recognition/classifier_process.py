@@ -23,7 +23,9 @@ Failure is reported, not hidden:
   goes on;
 - the worker dies (killed, out of memory): :meth:`~ClassifierProcess.classify` raises
   :class:`~speed_sign_detector.errors.ClassifierProcessError` with its exit code, and
-  the next call starts a new worker, so that a node keeps running.
+  the next call starts a new worker, so that a node keeps running;
+- the worker hangs (no answer within ``answer_timeout_s``, 30 s by default): it is
+  killed, and the same error and restart follow.
 """
 from __future__ import annotations
 
@@ -99,6 +101,8 @@ class ClassifierProcess:
 
     Args:
         config: the classifier's configuration (the worker builds it).
+        answer_timeout_s: a worker that has not answered a frame after this many seconds
+            is taken for hung: it is killed and the call raises (> 0).
 
     Raises:
         ClassifierError: what building the classifier raised in the worker (for example
@@ -106,8 +110,11 @@ class ClassifierProcess:
         ClassifierProcessError: when the worker cannot be started or exits first.
     """
 
-    def __init__(self, config: ClassifierConfig) -> None:
+    def __init__(self, config: ClassifierConfig, answer_timeout_s: float = 30.0) -> None:
+        if not answer_timeout_s > 0:
+            raise ValueError(f'answer_timeout_s must be > 0, got {answer_timeout_s}')
         self.config = config
+        self.answer_timeout_s = answer_timeout_s
         self._process: subprocess.Popen[bytes] | None = None
         self._connection: multiprocessing.connection.Connection | None = None
         self._start()
@@ -123,7 +130,8 @@ class ClassifierProcess:
 
         Raises:
             ClassifierInputError: for a frame the classifier refuses (the worker goes on).
-            ClassifierProcessError: when the worker died; the next call starts another.
+            ClassifierProcessError: when the worker died, or did not answer within
+                ``answer_timeout_s`` (it is killed); the next call starts another.
         """
         if self._connection is None:
             LOGGER.warning('starting a new classifier process (the previous one exited)')
@@ -132,6 +140,11 @@ class ClassifierProcess:
         assert connection is not None
         try:
             connection.send((gray, tuple(candidates)))
+            if not connection.poll(self.answer_timeout_s):
+                self._kill()
+                raise ClassifierProcessError(
+                    f'the classifier process did not answer within {self.answer_timeout_s:g}'
+                    ' s and was killed; the next frame starts a new one')
             status, answer = connection.recv()
         except (EOFError, OSError) as err:
             code = self._reap()
@@ -179,6 +192,12 @@ class ClassifierProcess:
         if status == 'error':
             self.close()
             raise answer
+
+    def _kill(self) -> None:
+        """Kill the worker at once (it may be stopped or hung) and forget it."""
+        if self._process is not None:
+            self._process.kill()
+        self._reap()
 
     def _reap(self) -> int | None:
         """Forget the worker (waited for; terminated when it does not exit in time) and
