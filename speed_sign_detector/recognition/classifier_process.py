@@ -55,6 +55,9 @@ LOGGER = logging.getLogger(__name__)
 
 #: Seconds a closing worker is given to finish before it is terminated.
 CLOSE_TIMEOUT_S = 5.0
+#: Seconds a new worker may take to build its classifier (filter banks built from
+#: scratch take seconds to a minute on 2 cores) before it is taken for hung.
+START_TIMEOUT_S = 600.0
 
 
 def _serve(connection: multiprocessing.connection.Connection) -> None:
@@ -184,6 +187,11 @@ class ClassifierProcess:
         self._process, self._connection = process, connection
         try:
             connection.send(self.config)
+            if not connection.poll(START_TIMEOUT_S):
+                self._kill()
+                raise ClassifierProcessError(
+                    f'the classifier process was not ready within {START_TIMEOUT_S:g} s and '
+                    'was killed')
             status, answer = connection.recv()
         except (EOFError, OSError) as err:
             code = self._reap()
