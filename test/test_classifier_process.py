@@ -12,6 +12,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from process_helpers import CLASSIFIER_WORKER, child_processes
 
 from speed_sign_detector.config import ClassifierConfig, PipelineConfig
 from speed_sign_detector.detection.candidates import Candidate
@@ -179,3 +180,17 @@ def test_hung_worker_is_killed_after_the_answer_timeout_then_replaced(
 def test_answer_timeout_must_be_positive(config: ClassifierConfig) -> None:
     with pytest.raises(ValueError, match='answer_timeout_s'):
         ClassifierProcess(config, answer_timeout_s=0.0)
+
+
+def test_worker_not_ready_in_time_is_killed_and_reported(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Building banks from scratch (no cache) takes seconds: with a start timeout of
+    0.3 s the worker is taken for hung, killed, and the constructor says so."""
+    from speed_sign_detector.recognition import classifier_process
+    monkeypatch.setattr(classifier_process, 'START_TIMEOUT_S', 0.3)
+    before = set(child_processes(CLASSIFIER_WORKER))
+    with pytest.raises(ClassifierProcessError,
+                       match='did not answer within 0.3 s.*before it was ready'):
+        ClassifierProcess(ClassifierConfig(cache_dir=''))
+    assert set(child_processes(CLASSIFIER_WORKER)) <= before  # none left running
+

@@ -31,6 +31,7 @@ from rclpy.qos import (
     ReliabilityPolicy,
     qos_profile_sensor_data,
 )
+from process_helpers import CLASSIFIER_WORKER, child_processes
 from ros_spin import spinning
 from scene_helpers import approach_frames, textured_background
 from sensor_msgs.msg import CompressedImage, Image, PointCloud2
@@ -386,12 +387,12 @@ def test_classifier_process_reads_signs_in_a_worker_process(ros: tuple) -> None:
     """``classifier_process`` set at run time: the classifier moves to a worker process,
     which reads the approach's limit; set back, it returns to the node's process."""
     node, probe = ros
-    assert not classifier_workers()
+    assert not child_processes(CLASSIFIER_WORKER)
     [result] = call_set_parameters(probe, parameter('classifier_process', True))
     assert result.successful, result.reason
     try:
         nearest = run_approach(probe, '70', compressed=False, seed=4)
-        assert len(classifier_workers()) == 1
+        assert len(child_processes(CLASSIFIER_WORKER)) == 1
         assert any(point['limit_kmh'] == 70 for point in nearest)
         wait_for(lambda: probe.limits and probe.limits[-1] == 70, 'speed_limit 70')
     finally:
@@ -399,23 +400,8 @@ def test_classifier_process_reads_signs_in_a_worker_process(ros: tuple) -> None:
     assert restored.successful, restored.reason
     send_and_wait(probe, image_message(textured_background(10), Header(), image_class=Image),
                   probe.image_pub)  # the change applies between frames
-    wait_for(lambda: not classifier_workers(), 'the classifier worker to stop')
+    wait_for(lambda: not child_processes(CLASSIFIER_WORKER), 'the classifier worker to stop')
 
-
-def classifier_workers() -> list[int]:
-    """Process ids of this process's classifier workers (from /proc: Linux)."""
-    found = []
-    for entry in Path('/proc').iterdir():
-        if not entry.name.isdigit():
-            continue
-        try:
-            command = (entry / 'cmdline').read_bytes()
-            parent = int((entry / 'stat').read_text().rsplit(')', 1)[1].split()[1])
-        except (OSError, ValueError, IndexError):
-            continue
-        if parent == os.getpid() and b'recognition.classifier_process' in command:
-            found.append(int(entry.name))
-    return found
 
 
 def test_parameter_file_lists_every_parameter_with_its_default() -> None:

@@ -39,7 +39,7 @@ import subprocess
 import sys
 from collections.abc import Sequence
 from types import TracebackType
-from typing import Self
+from typing import Any, Self
 
 import numpy as np
 
@@ -139,21 +139,9 @@ class ClassifierProcess:
         if self._connection is None:
             LOGGER.warning('starting a new classifier process (the previous one exited)')
             self._start()
-        connection = self._connection
-        assert connection is not None
-        try:
-            connection.send((gray, tuple(candidates)))
-            if not connection.poll(self.answer_timeout_s):
-                self._kill()
-                raise ClassifierProcessError(
-                    f'the classifier process did not answer within {self.answer_timeout_s:g}'
-                    ' s and was killed; the next frame starts a new one')
-            status, answer = connection.recv()
-        except (EOFError, OSError) as err:
-            code = self._reap()
-            raise ClassifierProcessError(
-                f'the classifier process exited (exit code {code}) while classifying a '
-                'frame; the next frame starts a new one') from err
+        status, answer = self._exchange((gray, tuple(candidates)), self.answer_timeout_s,
+                                        'while classifying a frame; the next frame starts '
+                                        'a new one')
         if status == 'error':
             raise answer
         return answer
@@ -185,21 +173,32 @@ class ClassifierProcess:
             child_end.close()
         connection = multiprocessing.connection.Connection(parent_end.detach())
         self._process, self._connection = process, connection
+        status, answer = self._exchange(self.config, START_TIMEOUT_S, 'before it was ready')
+        if status == 'error':
+            self.close()
+            raise answer
+
+    def _exchange(self, message: object, timeout_s: float, when: str) -> tuple[str, Any]:
+        """Send ``message`` to the worker and return its ``(status, answer)``.
+
+        Raises:
+            ClassifierProcessError: the worker exited, or did not answer within
+                ``timeout_s`` (it is then killed); ``when`` ends the message.
+        """
+        connection = self._connection
+        assert connection is not None
         try:
-            connection.send(self.config)
-            if not connection.poll(START_TIMEOUT_S):
+            connection.send(message)
+            if not connection.poll(timeout_s):
                 self._kill()
-                raise ClassifierProcessError(
-                    f'the classifier process was not ready within {START_TIMEOUT_S:g} s and '
-                    'was killed')
+                raise ClassifierProcessError(f'the classifier process did not answer within '
+                                             f'{timeout_s:g} s and was killed, {when}')
             status, answer = connection.recv()
         except (EOFError, OSError) as err:
             code = self._reap()
             raise ClassifierProcessError(f'the classifier process exited (exit code {code}) '
-                                         'before it was ready') from err
-        if status == 'error':
-            self.close()
-            raise answer
+                                         f'{when}') from err
+        return status, answer
 
     def _kill(self) -> None:
         """Kill the worker at once (it may be stopped or hung) and forget it."""
