@@ -94,6 +94,8 @@ def test_refused_frame_raises_the_classifiers_error_and_the_worker_goes_on(
     pid = worker.pid
     with pytest.raises(ClassifierInputError, match='uint8'):
         worker.classify(gray.astype(np.float32), candidates)
+    with pytest.raises(ClassifierInputError, match='non-empty'):
+        worker.classify(np.zeros((0, 0), np.uint8), candidates)
     assert worker.classify(gray, candidates) == in_process.classify(gray, candidates)
     assert worker.pid == pid
 
