@@ -24,8 +24,9 @@ class Candidate:
         radius_px: estimated radius of the sign, in pixels: the radius of the edge that
             voted (harmonic mean voting distance) divided by
             ``DetectorConfig.voting_edge_radius_ratio``. With the defaults (ratio 1,
-            bright_inside) that is mostly the inner edge of the red ring, about 0.7 of
-            the outer radius (median on GTSDB); ratio 0.66 reports the outer radius.
+            both polarities) that lies between the inner and the outer edge of the red
+            ring, about 0.77 of the outer radius (median on GTSDB; with bright_inside
+            mostly the inner edge, about 0.7).
         score: detector score (normalised vote; larger is more sign-like). Comparable
             between candidates of one frame, not an absolute probability.
         band: index of the radius band that won (0 = smallest radii).
