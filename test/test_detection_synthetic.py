@@ -12,7 +12,7 @@ import pytest
 
 from speed_sign_detector.config import DetectorConfig
 from speed_sign_detector.detection.candidates import Candidate
-from speed_sign_detector.detection.detector import Detector
+from speed_sign_detector.detection.detector import Detector, cpu_detector_advice
 from speed_sign_detector.errors import ConfigError, DetectorError, InvalidFrameError
 
 SUPERSAMPLE = 8
@@ -342,3 +342,21 @@ def test_two_gl_detectors_on_one_thread() -> None:
             assert_same(second.detect(large), other)
             assert math.hypot(other[0].x_px - 400.0, other[0].y_px - 300.0) <= 1.0
         assert_same(first.detect(small), alone)
+
+
+def test_cpu_detector_advice_names_the_costly_settings() -> None:
+    """On a CPU renderer the node warns once that its defaults trade frame rate for
+    small and backlit signs, and names the parameters that trade back."""
+    defaults = DetectorConfig()
+    advice = cpu_detector_advice('gl', 'llvmpipe (LLVM 15.0.6, 256 bits)', defaults)
+    assert advice is not None
+    for parameter in ('detector.polarity:=bright_inside', 'candidate_radius_scale:=1.33',
+                      'detector.vote_pixels_per_radius:=1.75', 'CPU-only hosts'):
+        assert parameter in advice
+    assert cpu_detector_advice('numpy', 'numpy reference', defaults) is not None
+    assert cpu_detector_advice('gl', 'NVIDIA H100 80GB HBM3/PCIe/SSE2', defaults) is None
+    frugal = DetectorConfig(polarity='bright_inside', vote_pixels_per_radius=1.75)
+    assert cpu_detector_advice('gl', 'llvmpipe (LLVM 15.0.6, 256 bits)', frugal) is None
+    only_polarity = cpu_detector_advice(
+        'gl', 'llvmpipe', DetectorConfig(vote_pixels_per_radius=1.75))
+    assert only_polarity is not None and 'vote_pixels_per_radius' not in only_polarity

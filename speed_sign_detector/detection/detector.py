@@ -37,6 +37,32 @@ from speed_sign_detector.errors import ConfigError, DetectorError
 LOGGER = logging.getLogger(__name__)
 
 BACKENDS = ('auto', 'gl', 'numpy')
+#: GL_RENDERER names of Mesa's CPU rasterizers: the "GPU" work then runs on the CPU.
+SOFTWARE_RENDERERS = ('llvmpipe', 'softpipe', 'swrast')
+
+
+def cpu_detector_advice(backend_name: str, renderer: str, config: DetectorConfig) -> str | None:
+    """Advice for a detector that runs on the CPU with the settings that pay on a GPU.
+
+    Both polarities voting and the smallest band voting at full resolution find more small
+    and backlit signs, and on 2 CPU cores made the detector about twice as slow (see the
+    README, "CPU-only hosts"). Returns None on a hardware GL renderer, or when neither
+    setting is in use; else one line naming the parameters that trade those signs for
+    frame rate.
+    """
+    on_cpu = backend_name == 'numpy' or any(name in renderer.lower()
+                                            for name in SOFTWARE_RENDERERS)
+    costly = []
+    if config.polarity == 'both':
+        costly.append('detector.polarity:=bright_inside (and '
+                      'classifier.candidate_radius_scale:=1.33)')
+    if config.vote_pixels_per_radius >= 2.0:
+        costly.append('detector.vote_pixels_per_radius:=1.75')
+    if not on_cpu or not costly:
+        return None
+    return (f'the detector runs on the CPU ({renderer}); its defaults favour small and '
+            f'backlit signs over frame rate. Where the frame rate matters more: '
+            f'{"; ".join(costly)} (README, "CPU-only hosts")')
 
 
 class Detector:

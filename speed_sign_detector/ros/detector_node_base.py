@@ -55,6 +55,7 @@ from speed_sign_detector.config import (
     node_option_specs,
     parameter_specs,
 )
+from speed_sign_detector.detection.detector import cpu_detector_advice
 from speed_sign_detector.errors import ConfigError, ImageConversionError, SpeedSignError
 from speed_sign_detector.image_conversion import message_to_gray
 from speed_sign_detector.pipeline import FrameResult, OverlappedPipeline, Pipeline
@@ -243,6 +244,10 @@ class DetectorNodeBase:
             f'({self._renderer}, {self._vote_method} voting)'
             + (f', GL not used because {self._fallback_reason}' if self._fallback_reason
                else ''))
+        advice = cpu_detector_advice(self._backend, self._renderer,
+                                     self._pipeline_config.detector)
+        if advice is not None:
+            self.get_logger().warning(advice)
 
     def unsubscribe_images(self) -> None:
         """Stop the subscriptions and the diagnostics timer (idempotent)."""
