@@ -56,11 +56,11 @@ def cpu_detector_advice(backend_name: str, renderer: str, config: DetectorConfig
     if config.polarity == 'both':
         costly.append('detector.polarity:=bright_inside (and '
                       'classifier.candidate_radius_scale:=1.33)')
-    if config.vote_pixels_per_radius >= 2.0:
+    if plan_bands(config)[0].target_level == 0:  # the smallest band at full resolution
         costly.append('detector.vote_pixels_per_radius:=1.75')
     if not on_cpu or not costly:
         return None
-    return (f'the detector runs on the CPU ({renderer}); its defaults favour small and '
+    return (f'the detector runs on the CPU ({renderer}); its settings favour small and '
             f'backlit signs over frame rate. Where the frame rate matters more: '
             f'{"; ".join(costly)} (README, "CPU-only hosts")')
 
