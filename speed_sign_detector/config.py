@@ -75,10 +75,10 @@ class DetectorConfig:
                                  low=1, high=32)
     polarity: str = setting('both', 'Which side of an edge votes: '
                             'bright_inside (white disc in a dark ring), dark_inside, '
-                            'or both (also the ring\'s outer edge against a brighter sky, '
-                            'and backlit signs whose disc is darker than the ring: on '
-                            'gtsdb-dev candidates on 281 of 284 limit signs against 269 '
-                            'with bright_inside, for about half again the voting time on '
+                            'or both (a sign\'s two concentric ring edges both vote, a '
+                            'plain bright blob\'s one edge scores half: on gtsdb-dev '
+                            'candidates on 281 of 284 limit signs against 269 with '
+                            'bright_inside, for about half again the voting time on '
                             'llvmpipe).', choices=('bright_inside', 'dark_inside', 'both'))
     vote_profile: str = setting('tent', 'Weight of a vote across its spread: tent (1 on '
                                 'the gradient line, falling linearly to 0 at +/- r tan(pi/8): '
