@@ -21,6 +21,8 @@ CONFIGS = {
     'both_flat_linear': DetectorConfig(polarity='both', vote_profile='flat',
                                        contrast='linear', edge_support=2,
                                        vote_pixels_per_radius=0.0),
+    # a wide second band: its scatter votes are not packed (two integers per pixel)
+    'two_bands': DetectorConfig(radius_bands=2),
 }
 
 

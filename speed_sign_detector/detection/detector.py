@@ -25,6 +25,7 @@ from speed_sign_detector.detection.candidates import (
     select_candidates,
 )
 from speed_sign_detector.detection.gradients import validate_frame
+from speed_sign_detector.detection.voting_gl import SOFTWARE_RENDERERS
 from speed_sign_detector.detection.voting_numpy import (
     RadiusBand,
     min_frame_size_px,
@@ -37,8 +38,6 @@ from speed_sign_detector.errors import ConfigError, DetectorError
 LOGGER = logging.getLogger(__name__)
 
 BACKENDS = ('auto', 'gl', 'numpy')
-#: GL_RENDERER names of Mesa's CPU rasterizers: the "GPU" work then runs on the CPU.
-SOFTWARE_RENDERERS = ('llvmpipe', 'softpipe', 'swrast')
 
 
 def cpu_detector_advice(backend_name: str, renderer: str, config: DetectorConfig) -> str | None:

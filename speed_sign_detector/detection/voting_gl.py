@@ -26,9 +26,10 @@ The same maths as :mod:`speed_sign_detector.detection.voting_numpy`, kept on the
      (RG for the first band, BA for the second; RG32F for a lone band);
    - ``scatter``: an indirect compute dispatch, one invocation per edge, walks the
      pixels whose centres lie inside the edge's trapezoid (the numpy reference's scanline
-     rule) and adds the same two values, in fixed point (units of
-     ``1 / FIXED_POINT_ONE``), to two R32UI images per band with ``imageAtomicAdd``.
-     Integer sums do not depend on the order of the edge list, so the votes are
+     rule) and adds the same two values in fixed point with ``imageAtomicAdd``, both
+     packed into one R32UI integer per pixel where the group's radii bound the sums
+     (one atomic per vote; :mod:`speed_sign_detector.detection.vote_fixed_point`), else
+     in two. Integer sums do not depend on the order of the edge list, so the votes are
      bit-reproducible. On a software renderer (Mesa llvmpipe) it is about twice as fast
      as the raster path: llvmpipe sets up every triangle on one CPU thread (about 0.7 us
      each), while compute work is spread over all cores;
@@ -61,6 +62,7 @@ import numpy as np
 from speed_sign_detector.config import DetectorConfig
 from speed_sign_detector.detection.candidates import BlockMaxima, score_normaliser
 from speed_sign_detector.detection.gradients import SUPPORT_ANGLE_DEG, gray_lookup
+from speed_sign_detector.detection.vote_fixed_point import VoteFixedPoint, vote_fixed_point
 from speed_sign_detector.detection.voting_numpy import (
     CHANNELS,
     SPREAD,
@@ -70,398 +72,30 @@ from speed_sign_detector.detection.voting_numpy import (
     pyramid_levels,
     vote_signs,
 )
+from speed_sign_detector.detection.voting_shaders import (
+    DOWNSAMPLE_SOURCE,
+    EDGES_SOURCE,
+    PYRAMID_SOURCE,
+    REDUCE_SOURCE,
+    RIDGE_SOURCE,
+    SCATTER_SOURCE,
+    VERTICES_PER_EDGE,
+    VOTE_FRAGMENT_SOURCE,
+    VOTE_VERTEX_SOURCE,
+    VOTES_AT_RASTER,
+    VOTES_AT_SCATTER,
+    with_constants,
+)
 from speed_sign_detector.errors import DetectorError
 
 if TYPE_CHECKING:
     import moderngl
 
 _GROUP = 8
-_VERTICES_PER_EDGE = 3
 _FUSED_LEVELS = 3  # pyramid levels the fused upload pass writes
-_SCATTER_GROUP = 64  # edges per work group of the scatter pass
-_EXTRACT_GROUP = 64  # edge pixels per work group of the extraction (support test)
-FIXED_POINT_ONE = 65536.0
-"""Scatter voting stores votes as integers in units of 1 / FIXED_POINT_ONE."""
 VOTE_METHODS = ('raster', 'scatter')
 SOFTWARE_RENDERERS = ('llvmpipe', 'softpipe', 'swrast', 'swiftshader', 'lavapipe', 'software')
 """GL_RENDERER substrings of renderers that run on the CPU (the benchmarks label them)."""
-
-_PYRAMID_SRC = """
-#version 430
-layout(local_size_x = 8, local_size_y = 8) in;
-layout(binding = 0) uniform usampler2D frame;
-layout(r32f, binding = 0) writeonly uniform image2D level0;
-layout(r32f, binding = 1) writeonly uniform image2D level1;
-layout(r32f, binding = 2) writeonly uniform image2D level2;
-uniform ivec2 size0;
-uniform ivec2 size1;
-uniform ivec2 size2;
-uniform int levels;
-uniform float lookup[256];
-// One invocation: a 4x4 block of level 0, its 2x2 block of level 1 and its level-2 pixel
-// (the same 2x2 box averages as the separate downsample pass; 'precise' keeps the compiler
-// from re-associating the sums, so the levels match that pass bit for bit).
-void main() {
-    ivec2 p = ivec2(gl_GlobalInvocationID.xy);
-    ivec2 origin = 4 * p;
-    if (origin.x >= size0.x || origin.y >= size0.y) return;
-    float v[16];
-    for (int dy = 0; dy < 4; ++dy) {
-        for (int dx = 0; dx < 4; ++dx) {
-            ivec2 q = origin + ivec2(dx, dy);
-            float value = 0.0;
-            if (q.x < size0.x && q.y < size0.y) {
-                value = lookup[texelFetch(frame, q, 0).r];
-                imageStore(level0, q, vec4(value));
-            }
-            v[4 * dy + dx] = value;
-        }
-    }
-    if (levels < 2) return;
-    float w[4];
-    for (int dy = 0; dy < 2; ++dy) {
-        for (int dx = 0; dx < 2; ++dx) {
-            ivec2 q = 2 * p + ivec2(dx, dy);
-            int i = 8 * dy + 2 * dx;
-            precise float a = v[i] + v[i + 1];
-            precise float b = v[i + 4] + v[i + 5];
-            precise float value = 0.25 * (a + b);
-            if (q.x < size1.x && q.y < size1.y) imageStore(level1, q, vec4(value));
-            w[2 * dy + dx] = value;
-        }
-    }
-    if (levels < 3 || p.x >= size2.x || p.y >= size2.y) return;
-    precise float a = w[0] + w[1];
-    precise float b = w[2] + w[3];
-    precise float value = 0.25 * (a + b);
-    imageStore(level2, p, vec4(value));
-}
-"""
-
-_DOWNSAMPLE_SRC = """
-#version 430
-layout(local_size_x = 8, local_size_y = 8) in;
-layout(r32f, binding = 0) readonly uniform image2D finer;
-layout(r32f, binding = 1) writeonly uniform image2D coarser;
-uniform ivec2 size;
-void main() {
-    ivec2 p = ivec2(gl_GlobalInvocationID.xy);
-    if (p.x >= size.x || p.y >= size.y) return;
-    ivec2 q = 2 * p;
-    float a = imageLoad(finer, q).r + imageLoad(finer, q + ivec2(1, 0)).r;
-    float b = imageLoad(finer, q + ivec2(0, 1)).r + imageLoad(finer, q + ivec2(1, 1)).r;
-    imageStore(coarser, p, vec4(0.25 * (a + b)));
-}
-"""
-
-# The 3x3 Sobel gradient of a pyramid level, recomputed where it is needed (writing an
-# RGBA32F gradient image costs llvmpipe more than the eight loads); 'precise' keeps every
-# call site bit-identical.
-_SOBEL_GLSL = """
-layout(r32f, binding = 0) readonly uniform image2D level;
-float at(ivec2 p) { return imageLoad(level, p).r; }
-// (gx, gy, magnitude) at an inner pixel p.
-vec3 sobel(ivec2 p) {
-    float tl = at(p + ivec2(-1, -1)), tc = at(p + ivec2(0, -1)), tr = at(p + ivec2(1, -1));
-    float ml = at(p + ivec2(-1, 0)), mr = at(p + ivec2(1, 0));
-    float bl = at(p + ivec2(-1, 1)), bc = at(p + ivec2(0, 1)), br = at(p + ivec2(1, 1));
-    precise float gx = ((tr - tl) + 2.0 * (mr - ml)) + (br - bl);
-    precise float gy = ((bl - tl) + 2.0 * (bc - tc)) + (br - tr);
-    precise float magnitude = sqrt(gx * gx + gy * gy);
-    return vec3(gx, gy, magnitude);
-}
-"""
-
-_RIDGE_SRC = """
-#version 430
-layout(local_size_x = 8, local_size_y = 8) in;
-SOBEL
-// an edge pixel's unit gradient direction g / |g|; (0, 0) elsewhere
-layout(rg32f, binding = 2) writeonly uniform image2D ridge;
-// the edge pixels in a list, and the group count of the extraction over them
-layout(std430, binding = 4) buffer Ridges {
-    uint ridge_dispatch[3];
-    uint ridge_count;
-    ivec2 ridge_pixels[];
-};
-uniform ivec2 size;
-uniform float threshold;
-uniform bool thin;
-bool inner(ivec2 p) { return p.x >= 1 && p.y >= 1 && p.x < size.x - 1 && p.y < size.y - 1; }
-// magnitude at p (0 on the frame border, where the gradient is not taken)
-float magnitude_at(ivec2 p) { return inner(p) ? sobel(p).z : 0.0; }
-bool is_ridge(ivec2 p, vec3 g) {
-    if (!inner(p)) return false;
-    if (!(g.z >= threshold)) return false;
-    if (!thin) return true;
-    float ax = abs(g.x), ay = abs(g.y);
-    const float tan22 = 0.41421357;
-    ivec2 d;
-    if (ay <= tan22 * ax) d = ivec2(1, 0);
-    else if (ax <= tan22 * ay) d = ivec2(0, 1);
-    else if (g.x * g.y > 0.0) d = ivec2(1, 1);
-    else d = ivec2(-1, 1);
-    float m_ahead = magnitude_at(p + d);
-    float m_behind = magnitude_at(p - d);
-    return g.z > m_behind && g.z >= m_ahead;
-}
-void main() {
-    ivec2 p = ivec2(gl_GlobalInvocationID.xy);
-    if (p.x >= size.x || p.y >= size.y) return;
-    vec3 g = inner(p) ? sobel(p) : vec3(0.0);
-    if (is_ridge(p, g)) {
-        imageStore(ridge, p, vec4(g.xy / g.z, 0.0, 0.0));
-        uint index = atomicAdd(ridge_count, 1u);
-        ridge_pixels[index] = p;
-        if (index % uint(EXTRACT_GROUP) == 0u) atomicAdd(ridge_dispatch[0], 1u);
-    } else {
-        imageStore(ridge, p, vec4(0.0));
-    }
-}
-""".replace('SOBEL', _SOBEL_GLSL)
-
-_EDGES_SRC = """
-#version 430
-layout(local_size_x = EXTRACT_GROUP) in;
-layout(rg32f, binding = 2) readonly uniform image2D ridge;
-layout(std430, binding = 4) readonly buffer Ridges {
-    uint ridge_dispatch[3];
-    uint ridge_count;
-    ivec2 ridge_pixels[];
-};
-layout(std430, binding = 0) buffer Command { uint command[4]; };
-layout(std430, binding = 1) writeonly buffer Edges { vec4 edges[]; };
-layout(std430, binding = 3) buffer Dispatch { uint dispatch[3]; };
-uniform uint vertices_per_edge;
-uniform int min_support;
-uniform float support_cosine;
-// one invocation per edge pixel of the ridge pass (all inner pixels)
-void main() {
-    if (gl_GlobalInvocationID.x >= ridge_count) return;
-    ivec2 p = ridge_pixels[gl_GlobalInvocationID.x];
-    vec2 direction = imageLoad(ridge, p).xy;
-    if (min_support > 0) {
-        int support = 0;
-        for (int dy = -1; dy <= 1; ++dy) {
-            for (int dx = -1; dx <= 1; ++dx) {
-                vec2 other = imageLoad(ridge, p + ivec2(dx, dy)).xy;
-                if ((dx == 0 && dy == 0) || other == vec2(0.0)) continue;
-                if (dot(direction, other) >= support_cosine) support += 1;
-            }
-        }
-        if (support < min_support) return;
-    }
-    uint index = atomicAdd(command[0], vertices_per_edge) / vertices_per_edge;
-    edges[index] = vec4(vec2(p), direction);
-    // the scatter pass runs one invocation per edge in groups of SCATTER_GROUP
-    if (index % uint(SCATTER_GROUP) == 0u) atomicAdd(dispatch[0], 1u);
-}
-"""
-
-_VOTE_VERTEX_SRC = """
-#version 430
-layout(std430, binding = 1) readonly buffer Edges { vec4 edges[]; };
-uniform vec2 size;
-uniform float max_radius;
-uniform float spread;
-uniform float vote_sign;
-uniform float shrink;
-noperspective out float distance_along;
-noperspective out float distance_across;
-void main() {
-    vec4 edge = edges[gl_VertexID / VERTICES_PER_EDGE];
-    int corner = gl_VertexID % VERTICES_PER_EDGE;
-    vec2 direction = vote_sign * edge.zw;
-    vec2 normal = vec2(-direction.y, direction.x);
-    float r = corner == 0 ? 0.0 : max_radius;
-    float side = corner == 1 ? 1.0 : -1.0;
-    vec2 position = (edge.xy + 0.5) * shrink - 0.5
-        + (r * shrink) * (direction + side * spread * normal);
-    distance_along = r;
-    distance_across = r * side * spread;
-    gl_Position = vec4((position + 0.5) / size * 2.0 - 1.0, 0.0, 1.0);
-}
-"""
-
-_VOTE_FRAGMENT_SRC = """
-#version 430
-noperspective in float distance_along;
-noperspective in float distance_across;
-uniform float min_radius;
-uniform float split_radius;
-uniform float spread;
-uniform bool tent;
-layout(location = 0) out vec4 votes;
-void main() {
-    if (distance_along < min_radius) discard;
-    float profile = tent ? clamp(1.0 - abs(distance_across) / (spread * distance_along),
-                                 0.0, 1.0) : 1.0;
-    float weight = profile / distance_along;
-    votes = distance_along < split_radius ? vec4(weight, profile, 0.0, 0.0)
-                                          : vec4(0.0, 0.0, weight, profile);
-}
-"""
-
-_SCATTER_SRC = """
-#version 430
-layout(local_size_x = SCATTER_GROUP) in;
-layout(std430, binding = 0) readonly buffer Command { uint command[4]; };
-layout(std430, binding = 1) readonly buffer Edges { vec4 edges[]; };
-// the group's votes: band slot s, sum w at (x + s W, y), n at (x + s W, y + H)
-layout(r32ui, binding = 0) uniform uimage2D votes;
-uniform ivec2 size;
-uniform float shrink;
-uniform float min_radius;
-uniform float max_radius;
-uniform float split_radius;
-uniform float vote_sign;
-uniform float spread;
-uniform bool tent;
-// One invocation per edge: the pixels whose centres lie inside its trapezoid, row by
-// row (the scanline rule of the numpy reference), each vote added as a fixed-point
-// integer (order-independent sums: the result does not depend on the edge order).
-void main() {
-    uint index = gl_GlobalInvocationID.x;
-    if (index >= command[0] / uint(VERTICES_PER_EDGE)) return;
-    vec4 edge = edges[index];
-    vec2 centre = (edge.xy + 0.5) * shrink - 0.5;
-    vec2 direction = vote_sign * edge.zw;
-    vec2 normal = vec2(-direction.y, direction.x);
-    float near = min_radius * shrink;
-    float far = max_radius * shrink;
-    vec2 corners[4] = vec2[4](centre + near * (direction + spread * normal),
-                              centre + far * (direction + spread * normal),
-                              centre + far * (direction - spread * normal),
-                              centre + near * (direction - spread * normal));
-    float low = min(min(corners[0].y, corners[1].y), min(corners[2].y, corners[3].y));
-    float high = max(max(corners[0].y, corners[1].y), max(corners[2].y, corners[3].y));
-    int first_row = max(int(ceil(low)), 0);
-    int last_row = min(int(floor(high)), size.y - 1);
-    for (int row = first_row; row <= last_row; ++row) {
-        float y = float(row);
-        float left = 3.0e38;
-        float right = -3.0e38;
-        for (int side = 0; side < 4; ++side) {
-            vec2 a = corners[side];
-            vec2 b = corners[(side + 1) & 3];
-            if ((y - a.y) * (y - b.y) <= 0.0 && a.y != b.y) {
-                float x = a.x + (y - a.y) * (b.x - a.x) / (b.y - a.y);
-                left = min(left, x);
-                right = max(right, x);
-            }
-        }
-        if (left > right) continue;
-        int first_col = max(int(ceil(left)), 0);
-        int last_col = min(int(floor(right)), size.x - 1);
-        for (int col = first_col; col <= last_col; ++col) {
-            vec2 offset = vec2(float(col), y) - centre;
-            float along = dot(offset, direction);
-            float profile = 1.0;
-            if (tent) {
-                profile = along > 0.0
-                    ? clamp(1.0 - abs(dot(offset, normal)) / (spread * along), 0.0, 1.0) : 0.0;
-            }
-            uint count = uint(profile * FIXED_POINT_ONE + 0.5);
-            if (count == 0u) continue;
-            float distance = max(along / shrink, 0.5 * min_radius);
-            uint weight = uint(profile / distance * FIXED_POINT_ONE + 0.5);
-            ivec2 q = ivec2(distance < split_radius ? col : col + size.x, row);
-            imageAtomicAdd(votes, q, weight);
-            imageAtomicAdd(votes, ivec2(q.x, row + size.y), count);
-        }
-    }
-}
-"""
-
-_REDUCE_SRC = """
-#version 430
-#define MAX_BANDS 8
-layout(local_size_x = 8, local_size_y = 8) in;
-// band b's (sum w, n) votes: channel weight_channel[b] of votes[b] at q + weight_offset[b]
-// and count_channel[b] at q + count_offset[b] (raster: RG or BA of the group's
-// RGBA32F/RG32F target, no offsets; scatter: the band's two quadrants of the group's
-// R32UI image)
-layout(binding = 0) uniform VOTE_SAMPLER votes[MAX_BANDS];
-struct Best { vec4 score_x_y_radius; vec4 band_unused; };
-layout(std430, binding = 2) writeonly buffer Blocks { Best blocks[]; };
-uniform ivec2 blocks_size;
-uniform ivec2 level_size[MAX_BANDS];
-uniform int block_level_px[MAX_BANDS];
-uniform int scale[MAX_BANDS];
-uniform int target_scale[MAX_BANDS];
-uniform int weight_channel[MAX_BANDS];
-uniform int count_channel[MAX_BANDS];
-uniform ivec2 weight_offset[MAX_BANDS];
-uniform ivec2 count_offset[MAX_BANDS];
-uniform float normaliser[MAX_BANDS];
-uniform int band_index[MAX_BANDS];
-uniform float vote_unit;
-vec2 votes_at(int b, ivec2 q) {
-    return vec2(float(texelFetch(votes[b], q + weight_offset[b], 0)[weight_channel[b]]),
-                float(texelFetch(votes[b], q + count_offset[b], 0)[count_channel[b]]))
-        * vote_unit;
-}
-float score_at(int b, ivec2 q) {
-    return votes_at(b, q).x * normaliser[b];
-}
-float score_clamped(int b, ivec2 q) {
-    return score_at(b, clamp(q, ivec2(0), level_size[b] - 1));
-}
-float offset(float minus, float centre, float plus) {
-    float curvature = minus - 2.0 * centre + plus;
-    if (curvature >= 0.0) return 0.0;
-    return clamp(0.5 * (minus - plus) / curvature, -0.5, 0.5);
-}
-// the best pixel of band B in this block (B a constant: llvmpipe indexes sampler arrays
-// with a constant fast, with a variable very slowly)
-#define BAND_BLOCK(B) { \\
-    float best = -1.0; \\
-    ivec2 best_q = ivec2(0); \\
-    int side = block_level_px[B]; \\
-    ivec2 origin = block * side; \\
-    for (int dy = 0; dy < side; ++dy) { \\
-        for (int dx = 0; dx < side; ++dx) { \\
-            ivec2 q = origin + ivec2(dx, dy); \\
-            if (q.x >= level_size[B].x || q.y >= level_size[B].y) continue; \\
-            float s = score_at(B, q); \\
-            if (s > best) { best = s; best_q = q; } \\
-        } \\
-    } \\
-    if (best > 0.0 && best > winner_score) { \\
-        float ox = offset(score_clamped(B, best_q - ivec2(1, 0)), best, \\
-                          score_clamped(B, best_q + ivec2(1, 0))); \\
-        float oy = offset(score_clamped(B, best_q - ivec2(0, 1)), best, \\
-                          score_clamped(B, best_q + ivec2(0, 1))); \\
-        vec2 band_votes = votes_at(B, best_q); \\
-        float step = float(target_scale[B]); \\
-        float half_step = 0.5 * (step - 1.0); \\
-        winner_score = best; \\
-        winner = B; \\
-        winner_centre = step * (vec2(best_q) + vec2(ox, oy)) + half_step; \\
-        winner_radius = band_votes.y / band_votes.x * float(scale[B]); \\
-    } \\
-}
-// One invocation per block: the best vote pixel over all bands (the first of equal
-// scores, bands in order), refined to sub-pixel with a parabola through its neighbours.
-void main() {
-    ivec2 block = ivec2(gl_GlobalInvocationID.xy);
-    if (block.x >= blocks_size.x || block.y >= blocks_size.y) return;
-    int index = block.y * blocks_size.x + block.x;
-    float winner_score = -1.0;
-    int winner = -1;
-    vec2 winner_centre = vec2(0.0);
-    float winner_radius = 0.0;
-    BAND_BLOCKS
-    if (winner < 0) {
-        blocks[index].score_x_y_radius = vec4(-1.0, 0.0, 0.0, 0.0);
-        blocks[index].band_unused = vec4(0.0);
-        return;
-    }
-    blocks[index].score_x_y_radius = vec4(winner_score, winner_centre, winner_radius);
-    blocks[index].band_unused = vec4(float(band_index[winner]), 0.0, 0.0, 0.0);
-}
-"""
-
 
 @dataclass
 class _LevelResources:
@@ -484,34 +118,47 @@ class _DrawGroup:
     Raster voting: an RGBA32F target holds ``(sum w, n)`` of the first band in RG and of
     the second in BA (the fragment shader routes a vote by its distance); a group of one
     band has an RG32F target (half the blending work). Scatter voting: one R32UI image,
-    ``bands`` vote images wide and two high, fixed point: band ``s`` keeps ``sum w`` at
-    ``(x + s W, y)`` and ``n`` at ``(x + s W, y + H)``. ``size`` is one band's
-    ``(W, H)``; ``framebuffer`` has the texture attached (it clears it).
+    ``bands`` vote images wide, in the integer format ``fixed_point``: packed, one
+    vote image high, band ``s`` keeping ``sum w`` and ``n`` in one integer at
+    ``(x + s W, y)``; else two high, ``n`` at ``(x + s W, y + H)``. ``size`` is one
+    band's ``(W, H)``; ``framebuffer`` has the texture attached (it clears it).
     """
 
     bands: tuple[RadiusBand, ...]
     size: tuple[int, int]
     texture: object
     framebuffer: object
-    scatter: bool
+    fixed_point: VoteFixedPoint | None
+    """The scatter votes' integer format; None for raster votes (float sums)."""
+
+    @property
+    def scatter(self) -> bool:
+        """True for scatter votes (integers), False for raster votes (floats)."""
+        return self.fixed_point is not None
 
     def band_votes(self, slot: int) -> tuple[int, int, tuple[int, int], tuple[int, int]]:
         """``(weight channel, count channel, weight offset, count offset)`` of band ``slot``
         in :attr:`texture` (offsets in texels)."""
-        if self.scatter:
+        if self.fixed_point is not None:
             width, height = self.size
-            return 0, 0, (slot * width, 0), (slot * width, height)
+            count_row = 0 if self.fixed_point.packed else height
+            return 0, 0, (slot * width, 0), (slot * width, count_row)
         return CHANNELS * slot, CHANNELS * slot + 1, (0, 0), (0, 0)
 
     def read_band(self, slot: int) -> np.ndarray:
         """Band ``slot``'s vote image, (H, W, CHANNELS) float32."""
         width, height = self.size
-        if self.scatter:
+        fixed_point = self.fixed_point
+        if fixed_point is not None:
             pixels = np.frombuffer(self.texture.read(), np.uint32).reshape(
-                2 * height, len(self.bands) * width)
+                -1, len(self.bands) * width)
             band = pixels[:, slot * width:(slot + 1) * width]
-            return (np.stack([band[:height], band[height:]], axis=-1)
-                    / FIXED_POINT_ONE).astype(np.float32)
+            if fixed_point.packed:
+                weight, count = band >> fixed_point.count_bits, band & fixed_point.count_mask
+            else:
+                weight, count = band[:height], band[height:]
+            return np.stack([weight / fixed_point.weight_one, count / fixed_point.count_one],
+                            axis=-1).astype(np.float32)
         pixels = np.frombuffer(self.texture.read(), np.float32).reshape(
             height, width, self.texture.components)
         return pixels[..., CHANNELS * slot:CHANNELS * (slot + 1)].copy()
@@ -628,19 +275,24 @@ class GLVoter:
             self.renderer = str(self._ctx.info['GL_RENDERER'])
             self.vote_method = resolve_vote_method(config.vote_method)
             scatter = self.vote_method == 'scatter'
-            self._pyramid = self._ctx.compute_shader(_PYRAMID_SRC)
-            self._downsample = self._ctx.compute_shader(_DOWNSAMPLE_SRC)
-            self._ridge = self._ctx.compute_shader(_with_constants(_RIDGE_SRC))
-            self._extract = self._ctx.compute_shader(_with_constants(_EDGES_SRC))
-            self._reduce = self._ctx.compute_shader(_REDUCE_SRC.replace(
+            self._pyramid = self._ctx.compute_shader(PYRAMID_SOURCE)
+            self._downsample = self._ctx.compute_shader(DOWNSAMPLE_SOURCE)
+            self._ridge = self._ctx.compute_shader(with_constants(RIDGE_SOURCE))
+            self._extract = self._ctx.compute_shader(with_constants(EDGES_SOURCE))
+            self._reduce = self._ctx.compute_shader(REDUCE_SOURCE.replace(
                 'VOTE_SAMPLER', 'usampler2D' if scatter else 'sampler2D').replace(
+                'VOTES_AT', VOTES_AT_SCATTER if scatter else VOTES_AT_RASTER).replace(
                 'BAND_BLOCKS', ' '.join(f'BAND_BLOCK({band})' for band in range(
                     len(self._bands)))))
-            self._scatter = (self._ctx.compute_shader(_with_constants(_SCATTER_SRC))
-                             if scatter else None)
+            # a scatter shader per integer format in use, packed or not (compiled apart)
+            formats = {vote_fixed_point(bands).packed
+                       for bands in _draw_groups(config, self._bands)} if scatter else set()
+            self._scatter = {packed: self._ctx.compute_shader(
+                with_constants(SCATTER_SOURCE).replace('PACKED_VOTES', str(int(packed))))
+                for packed in formats} or None
             self._vote = None if scatter else self._ctx.program(
-                vertex_shader=_with_constants(_VOTE_VERTEX_SRC),
-                fragment_shader=_VOTE_FRAGMENT_SRC)
+                vertex_shader=with_constants(VOTE_VERTEX_SOURCE),
+                fragment_shader=VOTE_FRAGMENT_SOURCE)
             self._vote_array = None if scatter else self._ctx.vertex_array(self._vote, [])
         except Exception as err:
             self._ctx.release()
@@ -715,7 +367,7 @@ class GLVoter:
         """Edge pixels per pyramid level of the last frame (reads 16 bytes per level)."""
         self._check_thread()
         with self._ctx:
-            return [int(np.frombuffer(level.command.read(), np.uint32)[0]) // _VERTICES_PER_EDGE
+            return [int(np.frombuffer(level.command.read(), np.uint32)[0]) // VERTICES_PER_EDGE
                     for level in self._levels]
 
     # -- internals ---------------------------------------------------------------------
@@ -742,11 +394,15 @@ class GLVoter:
         scatter = self.vote_method == 'scatter'
         for bands in _draw_groups(self._config, self._bands):
             size = level_size(width, height, bands[0].target_level)
-            texture = (ctx.texture((len(bands) * size[0], CHANNELS * size[1]), 1, dtype='u4')
-                       if scatter else ctx.texture(size, CHANNELS * len(bands), dtype='f4'))
+            fixed_point = vote_fixed_point(bands) if scatter else None
+            if fixed_point is not None:
+                rows = size[1] if fixed_point.packed else CHANNELS * size[1]
+                texture = ctx.texture((len(bands) * size[0], rows), 1, dtype='u4')
+            else:
+                texture = ctx.texture(size, CHANNELS * len(bands), dtype='f4')
             self._groups.append(_DrawGroup(bands, size, texture,
                                            ctx.framebuffer(color_attachments=[texture]),
-                                           scatter))
+                                           fixed_point))
         block = self._config.block_size_px
         self._blocks_shape = (-(-height // block), -(-width // block))
         self._blocks = ctx.buffer(reserve=32 * self._blocks_shape[0] * self._blocks_shape[1])
@@ -798,7 +454,7 @@ class GLVoter:
                             _groups(coarser.height_px))
             self._calls.memory_barrier()
         self._stage('upload_pyramid')
-        self._extract['vertices_per_edge'] = _VERTICES_PER_EDGE
+        self._extract['vertices_per_edge'] = VERTICES_PER_EDGE
         self._extract['min_support'] = self._config.edge_support
         self._extract['support_cosine'] = math.cos(math.radians(SUPPORT_ANGLE_DEG))
         self._ridge['threshold'] = float(self._config.gradient_threshold)
@@ -858,10 +514,10 @@ class GLVoter:
 
     def _scatter_votes(self) -> None:
         """Scatter voting: one indirect compute dispatch per group and vote direction."""
-        scatter = self._scatter
-        scatter['spread'] = SPREAD
-        scatter['tent'] = self._config.vote_profile == 'tent'
         for group in self._groups:
+            scatter = self._scatter[group.fixed_point.packed]
+            scatter['spread'] = SPREAD
+            scatter['tent'] = self._config.vote_profile == 'tent'
             first, last = group.bands[0], group.bands[-1]
             level = self._levels[first.level]
             group.framebuffer.clear(0.0, 0.0, 0.0, 0.0)
@@ -871,6 +527,10 @@ class GLVoter:
             scatter['min_radius'] = first.level_radii[0]
             scatter['max_radius'] = last.level_radii[1]
             scatter['split_radius'] = _split_radius(group.bands)
+            if group.fixed_point.packed:
+                scatter['count_bits'] = group.fixed_point.count_bits
+            scatter['weight_one'] = group.fixed_point.weight_one
+            scatter['count_one'] = group.fixed_point.count_one
             level.command.bind_to_storage_buffer(0)
             level.edges.bind_to_storage_buffer(1)
             for sign in vote_signs(self._config, first):
@@ -884,13 +544,13 @@ class GLVoter:
         self._blocks.bind_to_storage_buffer(2)
         reduce = self._reduce
         reduce['blocks_size'] = (cols, rows)
-        reduce['vote_unit'] = 1.0 / FIXED_POINT_ONE if self._scatter else 1.0
         block = self._config.block_size_px
         bands = [(group, slot, band) for group in self._groups
                  for slot, band in enumerate(group.bands)]
         unit_values: dict[str, list] = {name: [] for name in (
             'level_size', 'block_level_px', 'scale', 'target_scale', 'weight_channel',
-            'count_channel', 'weight_offset', 'count_offset', 'normaliser', 'band_index')}
+            'count_channel', 'weight_offset', 'count_offset', 'normaliser', 'band_index',
+            'count_bits', 'weight_unit', 'count_unit')}
         for unit, (group, slot, band) in enumerate(bands):
             group.texture.use(unit)
             weight_channel, count_channel, weight_offset, count_offset = group.band_votes(slot)
@@ -905,7 +565,15 @@ class GLVoter:
             unit_values['normaliser'].append(score_normaliser(len(vote_signs(self._config,
                                                                              band))))
             unit_values['band_index'].append(band.index)
+            fixed_point = group.fixed_point
+            unit_values['count_bits'].append(fixed_point.count_bits if fixed_point else 0)
+            unit_values['weight_unit'].append(1.0 / fixed_point.weight_one if fixed_point
+                                              else 1.0)
+            unit_values['count_unit'].append(1.0 / fixed_point.count_one if fixed_point
+                                             else 1.0)
         for name, values in unit_values.items():
+            if name not in reduce:  # the raster reduction reads floats: no units
+                continue
             uniform = reduce[name]
             padding = [values[0]] * (uniform.array_length - len(values))
             uniform.value = values + padding
@@ -936,15 +604,6 @@ def resolve_vote_method(vote_method: str) -> str:
 def _split_radius(bands: tuple[RadiusBand, ...]) -> float:
     """Level-pixel distance from which a vote goes to the group's second band."""
     return bands[0].level_radii[1] if len(bands) == 2 else 3.0e38
-
-
-def _with_constants(source: str) -> str:
-    """Shader source with the module's constants defined after its #version line."""
-    return source.replace('#version 430', '#version 430\n'
-                          f'#define VERTICES_PER_EDGE {_VERTICES_PER_EDGE}\n'
-                          f'#define SCATTER_GROUP {_SCATTER_GROUP}\n'
-                          f'#define EXTRACT_GROUP {_EXTRACT_GROUP}\n'
-                          f'#define FIXED_POINT_ONE {FIXED_POINT_ONE:.1f}', 1)
 
 
 def _groups(extent: int) -> int:
