@@ -131,11 +131,6 @@ class _DrawGroup:
     fixed_point: VoteFixedPoint | None
     """The scatter votes' integer format; None for raster votes (float sums)."""
 
-    @property
-    def scatter(self) -> bool:
-        """True for scatter votes (integers), False for raster votes (floats)."""
-        return self.fixed_point is not None
-
     def band_votes(self, slot: int) -> tuple[int, int, tuple[int, int], tuple[int, int]]:
         """``(weight channel, count channel, weight offset, count offset)`` of band ``slot``
         in :attr:`texture` (offsets in texels)."""
