@@ -279,9 +279,12 @@ class GLVoter:
                 'VOTES_AT', VOTES_AT_SCATTER if scatter else VOTES_AT_RASTER).replace(
                 'BAND_BLOCKS', ' '.join(f'BAND_BLOCK({band})' for band in range(
                     len(self._bands)))))
-            # a scatter shader per integer format in use, packed or not (compiled apart)
-            formats = {vote_fixed_point(bands).packed
-                       for bands in _draw_groups(config, self._bands)} if scatter else set()
+            # each draw group with its scatter votes' integer format (None: raster votes),
+            # and a scatter shader per format in use, packed or not (compiled apart)
+            self._group_formats = [(bands, vote_fixed_point(bands) if scatter else None)
+                                   for bands in _draw_groups(config, self._bands)]
+            formats = {fixed_point.packed for _, fixed_point in self._group_formats
+                       if fixed_point is not None}
             self._scatter = {packed: self._ctx.compute_shader(
                 with_constants(SCATTER_SOURCE).replace('PACKED_VOTES', str(int(packed))))
                 for packed in formats} or None
@@ -386,10 +389,8 @@ class GLVoter:
                 ridges=ctx.buffer(reserve=16 + 8 * level_width * level_height)))
             level_width, level_height = level_width // 2, level_height // 2
         self._groups = []
-        scatter = self.vote_method == 'scatter'
-        for bands in _draw_groups(self._config, self._bands):
+        for bands, fixed_point in self._group_formats:
             size = level_size(width, height, bands[0].target_level)
-            fixed_point = vote_fixed_point(bands) if scatter else None
             if fixed_point is not None:
                 rows = size[1] if fixed_point.packed else CHANNELS * size[1]
                 texture = ctx.texture((len(bands) * size[0], rows), 1, dtype='u4')
