@@ -18,6 +18,7 @@ from typing import Any, Self
 
 import numpy as np
 
+from speed_sign_detector.blas_threads import blas_thread_advice
 from speed_sign_detector.config import PipelineConfig
 from speed_sign_detector.detection.candidates import Candidate
 from speed_sign_detector.detection.detector import Detector
@@ -102,6 +103,9 @@ class Pipeline:
                                                    backend=self.config.backend)
         self._classifier = _build_classifier(self.config)
         self._tracker = Tracker(self.config.tracker)
+        advice = blas_thread_advice() if isinstance(self._classifier, Classifier) else None
+        if advice is not None:
+            LOGGER.warning(advice)
         LOGGER.info('pipeline ready: backend %s (%s), %s voting%s', self.backend_name,
                     self.renderer, self.vote_method,
                     f', fell back because {self.fallback_reason}' if self.fallback_reason

@@ -1,4 +1,5 @@
-"""The executables that run the pipeline ask for one BLAS thread before numpy loads."""
+"""The executables that run the pipeline ask for one BLAS thread before numpy loads, and a
+pipeline built in a process that set none warns."""
 from __future__ import annotations
 
 import json
@@ -6,7 +7,18 @@ import os
 import subprocess
 import sys
 
-from speed_sign_detector.blas_threads import BLAS_THREAD_VARIABLES, use_one_blas_thread
+import pytest
+
+from speed_sign_detector.blas_threads import (
+    BLAS_THREAD_VARIABLES,
+    FALLBACK_THREAD_VARIABLES,
+    blas_thread_advice,
+    use_one_blas_thread,
+)
+from speed_sign_detector.config import PipelineConfig
+from speed_sign_detector.pipeline import Pipeline
+
+EVERY_THREAD_VARIABLE = BLAS_THREAD_VARIABLES + FALLBACK_THREAD_VARIABLES
 
 
 def test_unset_variables_are_set_and_the_users_choice_stands(monkeypatch) -> None:
@@ -62,3 +74,37 @@ def test_node_entry_point_loads_no_numpy_before_it_sets_one_thread() -> None:
     result = _environment_after(code)
     assert result['numpy_before'] == 'not loaded'
     assert result['values']['OPENBLAS_NUM_THREADS'] == '1'
+
+
+def test_advice_only_where_no_thread_variable_is_set(monkeypatch) -> None:
+    for name in EVERY_THREAD_VARIABLE:
+        monkeypatch.delenv(name, raising=False)
+    advice = blas_thread_advice(cpu_count=4)
+    assert advice is not None
+    assert 'runs 4 threads' in advice and 'OPENBLAS_NUM_THREADS=1' in advice
+    assert blas_thread_advice(cpu_count=1) is None  # one core: nothing to take
+    for name in EVERY_THREAD_VARIABLE:
+        monkeypatch.setenv(name, '2')  # any choice of the user's, even more threads
+        assert blas_thread_advice(cpu_count=4) is None
+        monkeypatch.delenv(name)
+
+
+@pytest.mark.parametrize('preset', [None, 'OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS'])
+def test_pipeline_warns_when_no_thread_variable_is_set(monkeypatch, caplog, preset) -> None:
+    for name in EVERY_THREAD_VARIABLE:
+        monkeypatch.delenv(name, raising=False)
+    if preset is not None:
+        monkeypatch.setenv(preset, '1')
+    monkeypatch.setattr(os, 'cpu_count', lambda: 2)  # the same on a one-core machine
+    with caplog.at_level('WARNING', logger='speed_sign_detector.pipeline'):
+        with Pipeline(PipelineConfig(backend='numpy')):
+            pass
+        with Pipeline(PipelineConfig(backend='numpy', classify=False)):
+            pass  # no classifier, no matrix products: never a warning
+    warnings = [record.getMessage() for record in caplog.records
+                if record.name == 'speed_sign_detector.pipeline'
+                and record.levelname == 'WARNING']
+    if preset is None:
+        assert len(warnings) == 1 and 'OPENBLAS_NUM_THREADS=1' in warnings[0]
+    else:
+        assert warnings == []
