@@ -152,6 +152,33 @@ def test_small_and_large_signs_are_rescaled(classifier: Classifier) -> None:
 
 
 
+@pytest.mark.parametrize('direction', [(-1.0, 0.0), (0.0, -1.0), (1.0, 0.0), (0.0, 1.0),
+                                       (-0.7, -0.7)])
+@pytest.mark.parametrize('radius_px', [9.0, 16.0, 26.0])
+def test_sign_off_the_candidate_centre_is_found_on_every_side(
+        classifier: Classifier, direction: tuple[float, float], radius_px: float) -> None:
+    # the detection filters search +-position_search radii around the candidate; a
+    # sign up or left of it was once placed a whole FFT size away (the correlation
+    # plane's circular index was not unwrapped) and went unread
+    offset = 0.3 * radius_px
+    frame = make_scene('50', radius_px, seed=5, shape=(160, 200), centre=(100.0, 80.0))
+    candidate = Candidate(100.0 - direction[0] * offset, 80.0 - direction[1] * offset,
+                          radius_px * 0.78, 1.0)
+    result = classifier.classify(frame, [candidate])[0]
+    assert result.limit_kmh == 50, (direction, radius_px, result)
+    assert abs(result.x_px - 100.0) <= 1.5 and abs(result.y_px - 80.0) <= 1.5, result
+
+
+def test_tight_crop_cut_off_centre_is_read(classifier: Classifier) -> None:
+    # a tight box a few pixels off the sign, as another tool may cut it: the sign
+    # up-left of the box centre and cut on one side by the box border
+    frame = make_scene('30', 16.0, seed=9, shape=(160, 200), centre=(100.0, 80.0))
+    for shift_x, shift_y in ((5, 0), (0, 5), (4, 4), (-5, 0), (0, -5)):
+        crop = frame[80 - 16 + shift_y:80 + 16 + shift_y, 100 - 16 + shift_x:100 + 16 + shift_x]
+        result = classifier.classify_crop(np.ascontiguousarray(crop), framing='tight')
+        assert result.limit_kmh == 30, (shift_x, shift_y, result)
+
+
 @pytest.mark.parametrize('kind', ['30', '50', '80'])
 @pytest.mark.parametrize(('radius_px', 'candidate_radius_px'), [(30.0, 14.0), (24.0, 11.0)])
 def test_large_sign_found_by_its_inner_ring_is_read_at_a_larger_size(

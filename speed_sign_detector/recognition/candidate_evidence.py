@@ -217,9 +217,15 @@ class EvidenceSearch:
             offset = (position.largest - bank.fft_size) // 2
             position.bank_index = best_index
             position.detection_psr = best_psr
-            # sign centre in ROI pixel coordinates (continuous)
-            position.centre_y = peak_y + offset + bank.canvas_px / 2.0
-            position.centre_x = peak_x + offset + bank.canvas_px / 2.0
+            # sign centre in ROI pixel coordinates (continuous): the peak's plane index is
+            # circular, and the search square around the expected peak reaches across
+            # index 0 (a sign up or left of the position by more than that peak's few
+            # pixels), so it is taken as a signed shift from the expected peak
+            expected = (bank.fft_size - bank.canvas_px) // 2
+            position.centre_y = (expected + _signed_shift(peak_y - expected, bank.fft_size)
+                                 + offset + bank.canvas_px / 2.0)
+            position.centre_x = (expected + _signed_shift(peak_x - expected, bank.fft_size)
+                                 + offset + bank.canvas_px / 2.0)
 
     def _classify(self, positions: Sequence[_Position]) -> None:
         """Every classification filter's match, coarse to fine: at the detected size the
@@ -394,6 +400,12 @@ def _window(image: np.ndarray, top: int, left: int, size: int) -> np.ndarray:
     rows = np.clip(np.arange(top, top + size), 0, height - 1)
     cols = np.clip(np.arange(left, left + size), 0, width - 1)
     return image[rows[:, None], cols[None, :]]
+
+
+def _signed_shift(shift: int, period: int) -> int:
+    """A circular shift of a correlation plane of side ``period`` as the signed shift in
+    ``[-period // 2, period - period // 2)``."""
+    return (shift + period // 2) % period - period // 2
 
 
 def _mean(values: Sequence[float]) -> float:

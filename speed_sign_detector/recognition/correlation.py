@@ -132,7 +132,9 @@ class PeakStats:
 
     Attributes:
         value: (F,) peak heights.
-        y, x: (F,) peak positions (plane indices).
+        y, x: (F,) peak positions: plane indices in ``[0, Ny)`` and ``[0, Nx)``, circular
+            (a peak ``k`` pixels before index 0 reads ``N - k``; callers that expect a
+            shift of either sign unwrap it).
         psr: (F,) peak-to-sidelobe ratios.
     """
 
