@@ -29,6 +29,7 @@ BLAS_THREAD_VARIABLES: tuple[str, ...] = ('OPENBLAS_NUM_THREADS', 'MKL_NUM_THREA
 #: Variables a BLAS also takes its thread count from when its own is not set (OpenBLAS:
 #: ``GOTO_NUM_THREADS``, then ``OMP_NUM_THREADS``; MKL: ``OMP_NUM_THREADS``).
 FALLBACK_THREAD_VARIABLES: tuple[str, ...] = ('GOTO_NUM_THREADS', 'OMP_NUM_THREADS')
+_EVERY_THREAD_VARIABLE = BLAS_THREAD_VARIABLES + FALLBACK_THREAD_VARIABLES
 
 
 def use_one_blas_thread() -> dict[str, str]:
@@ -60,10 +61,9 @@ def blas_thread_advice(cpu_count: int | None = None) -> str | None:
         the cost and the fix.
     """
     cores = os.cpu_count() if cpu_count is None else cpu_count
-    if (cores or 1) <= 1 or any(name in os.environ for name in
-                                BLAS_THREAD_VARIABLES + FALLBACK_THREAD_VARIABLES):
+    if (cores or 1) <= 1 or any(name in os.environ for name in _EVERY_THREAD_VARIABLE):
         return None
-    return (f'none of {", ".join(BLAS_THREAD_VARIABLES + FALLBACK_THREAD_VARIABLES)} is '
+    return (f'none of {", ".join(_EVERY_THREAD_VARIABLE)} is '
             f'set, so numpy\'s BLAS likely runs {cores} threads, which keep spinning after '
             f'the classifier\'s small matrix products and take cores from the detector '
             f'(on 2 cores the GL detector took 94-99 ms per 816x480 frame so, 73-74 ms '

@@ -15,6 +15,7 @@ import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import TypeVar
 
 import cv2
 import numpy as np
@@ -290,8 +291,8 @@ class EvidenceSearch:
             search = max(1, int(round(config.class_position_search * bank.radius_px)))
             stats = peak_psr(planes, expected, search, *self._lobes(bank.radius_px))
             # circular -> signed shifts, then the sign's centre in ROI pixels
-            centre_xs = ((stats.x + size // 2) % size - size // 2 + lefts + size / 2.0).tolist()
-            centre_ys = ((stats.y + size // 2) % size - size // 2 + tops + size / 2.0).tolist()
+            centre_xs = (_signed_shift(stats.x, size) + lefts + size / 2.0).tolist()
+            centre_ys = (_signed_shift(stats.y, size) + tops + size / 2.0).tolist()
             psrs = stats.psr.tolist()
             plane = 0
             for job_number, (_, _, chosen) in zip(job_numbers, group):
@@ -402,9 +403,12 @@ def _window(image: np.ndarray, top: int, left: int, size: int) -> np.ndarray:
     return image[rows[:, None], cols[None, :]]
 
 
-def _signed_shift(shift: int, period: int) -> int:
-    """A circular shift of a correlation plane of side ``period`` as the signed shift in
-    ``[-period // 2, period - period // 2)``."""
+IndexT = TypeVar('IndexT', int, np.ndarray)
+
+
+def _signed_shift(shift: IndexT, period: int) -> IndexT:
+    """A circular shift of a correlation plane of side ``period`` (an int, or an integer
+    array of them) as the signed shift in ``[-period // 2, period - period // 2)``."""
     return (shift + period // 2) % period - period // 2
 
 
