@@ -83,7 +83,8 @@ class _Position:
     largest: int  # ROI side, pixels (largest FFT size of those banks)
     raw: np.ndarray  # (largest, largest) uint8 ROI
     enhanced: np.ndarray  # the same after CLAHE (or ``raw``)
-    # by bank index: (best detection PSR of the size, peak row, peak column)
+    # by bank index: (best detection PSR of the size, peak row, peak column); the peak in
+    # plane pixels, unwrapped around the expected peak (it may lie before index 0)
     detections: dict[int, tuple[float, int, int]] = field(default_factory=dict)
     bank_index: int = -1  # the best detection filter's size
     detection_psr: float = 0.0
@@ -205,8 +206,13 @@ class EvidenceSearch:
             tops = psr.argmax(axis=1)
             for slot, (position, _) in enumerate(group):
                 plane = slot * filters + int(tops[slot])
-                position.detections[index] = (float(psr[slot, tops[slot]]),
-                                              int(stats.y[plane]), int(stats.x[plane]))
+                # the plane index is circular, and the search square around the expected
+                # peak reaches across index 0 (a sign up or left of the position by more
+                # than that peak's few pixels): a signed shift from the expected peak
+                position.detections[index] = (
+                    float(psr[slot, tops[slot]]),
+                    centre + _signed_shift(int(stats.y[plane]) - centre, size),
+                    centre + _signed_shift(int(stats.x[plane]) - centre, size))
         for position in positions:
             best_index = -1
             best_psr = 0.0
@@ -218,15 +224,9 @@ class EvidenceSearch:
             offset = (position.largest - bank.fft_size) // 2
             position.bank_index = best_index
             position.detection_psr = best_psr
-            # sign centre in ROI pixel coordinates (continuous): the peak's plane index is
-            # circular, and the search square around the expected peak reaches across
-            # index 0 (a sign up or left of the position by more than that peak's few
-            # pixels), so it is taken as a signed shift from the expected peak
-            expected = (bank.fft_size - bank.canvas_px) // 2
-            position.centre_y = (expected + _signed_shift(peak_y - expected, bank.fft_size)
-                                 + offset + bank.canvas_px / 2.0)
-            position.centre_x = (expected + _signed_shift(peak_x - expected, bank.fft_size)
-                                 + offset + bank.canvas_px / 2.0)
+            # sign centre in ROI pixel coordinates (continuous)
+            position.centre_y = peak_y + offset + bank.canvas_px / 2.0
+            position.centre_x = peak_x + offset + bank.canvas_px / 2.0
 
     def _classify(self, positions: Sequence[_Position]) -> None:
         """Every classification filter's match, coarse to fine: at the detected size the
