@@ -4,7 +4,8 @@
 Prints (stderr, and with ``--json`` one JSON object as the last stdout line):
 
 Both the trained bank (the package's default, or ``--bank-file``) and the rendered
-templates alone (``bank_file: none``) are measured in the same run:
+templates alone (``bank_file: none``) are measured in the same run, and any bank named by
+``--compare-bank`` (the previous default, say):
 
 - filter-bank build time (``cache_dir`` "", so really built) and memory of the
   spectra; peak resident memory growth of the process while building;
@@ -19,7 +20,7 @@ templates alone (``bank_file: none``) are measured in the same run:
 Usage::
 
     python bench/bench_classifier.py [--frames 20] [--data ../shared/data/gtsrb-dev]
-        [--every 4] [--threads 2] [--json]
+        [--every 4] [--threads 2] [--compare-bank prev.npz] [--json]
 """
 from __future__ import annotations
 
@@ -265,6 +266,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--json', action='store_true', help='JSON object as last stdout line')
     parser.add_argument('--bank-file', default='', help='trained bank to time against the '
                         'rendered-only one ("" = the package\'s default bank)')
+    parser.add_argument('--compare-bank', action='append', default=[], metavar='FILE',
+                        help='another trained bank timed in the same run (for example the '
+                             'previous default: git show REV:speed_sign_detector/recognition/'
+                             'data/default_bank.npz > prev.npz); repeatable')
     parser.add_argument('--threads', type=int, default=0, help='also classify the frames in '
                         'this many threads at once with the trained bank, to see how much '
                         'of the classifier holds the GIL (0 = skip)')
@@ -272,7 +277,8 @@ def main(argv: list[str] | None = None) -> int:
 
     result: dict[str, object] = {}
     # the trained bank (the package's default) against the renderings alone, same run
-    for bank_name, bank_file in (('trained', args.bank_file), ('rendered', 'none')):
+    compared = [(f'compared {path}', path) for path in args.compare_bank]
+    for bank_name, bank_file in [('trained', args.bank_file), ('rendered', 'none'), *compared]:
         rss_before = _rss_mb()
         start = time.perf_counter()
         classifier = Classifier(ClassifierConfig(cache_dir='', bank_file=bank_file))
@@ -301,8 +307,10 @@ def main(argv: list[str] | None = None) -> int:
                   f"{crops['rendering_vs_real_mean_ncc']}", file=sys.stderr)
         if bank_name == 'trained':
             result.update(figures)  # the default bank's figures at the top level
-        else:
+        elif bank_name == 'rendered':
             result['rendered_bank'] = figures
+        else:
+            result.setdefault('compared_banks', {})[bank_file] = figures
     if args.threads > 1:
         together = bench_threads(ClassifierConfig(cache_dir='', bank_file=args.bank_file),
                                  args.frames, args.threads)

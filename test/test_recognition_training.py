@@ -118,6 +118,10 @@ def test_training_gives_a_bank_that_reads_those_signs(trained: TrainedBank) -> N
     # it chooses only among the labels it saw real examples of
     assert set(trained.second_opinion.real_labels) == {'30', '50', '80', 'other_sign'}
     assert set(trained.class_examples) == {'30', '50', '80'}
+    # composite filters trained from the crops (and the renderings of the other labels)
+    assert trained.real_filters is not None
+    assert set(trained.real_filters.labels) == set(trained.second_opinion.labels)
+    assert trained.real_filters.weight == TRAINING.real_filter_weight > 0
     assert trained.provenance['counts_per_class'] == {'30': 9, '50': 9, '80': 9,
                                                       'other_sign': 9}
 
@@ -133,6 +137,9 @@ def test_bank_file_round_trips(tmp_path: Path, trained: TrainedBank) -> None:
     assert loaded.candidates == trained.candidates and loaded.min_lead == trained.min_lead
     assert loaded.provenance['counts_per_class'] == trained.provenance['counts_per_class']
     assert loaded.provenance['package_version']
+    assert loaded.real_filters is not None and trained.real_filters is not None
+    assert loaded.real_filters.labels == trained.real_filters.labels
+    np.testing.assert_array_equal(loaded.real_filters.spectra, trained.real_filters.spectra)
     crop = crop_of('50', 36, 5, seed=77)
     config = dataclasses.replace(SMALL, bank_file=str(path))
     assert Classifier(config).classify_crop(crop).label == '50'
@@ -282,6 +289,9 @@ def test_folds_never_split_a_track(crop_folder: Path) -> None:
 def test_cross_validation_reports_every_variant(crop_folder: Path) -> None:
     report = cross_validate([crop_folder], 3, SMALL, TRAINING)
     assert report['crops'] == 36 and report['folds'] == 3
+    assert set(report['variants']) == {'rendered', 'trained_filters',
+                                       'second_opinion_rendered_ranking',
+                                       'trained_filters_second_opinion'}
     for variant, summary in report['variants'].items():
         assert set(summary['per_class']) == {'30', '50', '80'}, variant
         assert summary['lookalikes'] == 9
@@ -321,14 +331,22 @@ def test_train_command_builds_a_bank_and_reports_bad_input(tmp_path: Path,
     env = dict(os.environ, PYTHONWARNINGS='ignore')
     done = subprocess.run(_train_command() + [
         'build', str(out), str(crop_folder), '--config', str(config), '--augmented-copies', '0',
-        '--examples-per-class', '1', '--rendered-per-kind', '1', '--json', '-q'],
-        capture_output=True, text=True, timeout=300, env=env)
+        '--examples-per-class', '1', '--rendered-per-kind', '1', '--real-filter-weight', '0.5',
+        '--json', '-q'], capture_output=True, text=True, timeout=300, env=env)
     assert done.returncode == 0, done.stderr
     summary = json.loads(done.stdout.strip().splitlines()[-1])
     assert summary['crops'] == 36 and out.is_file() and summary['bytes'] == out.stat().st_size
-    provenance = load_trained_bank(out).provenance
+    built = load_trained_bank(out)
+    provenance = built.provenance
     assert provenance['data_folders'] == [str(crop_folder)]
     assert provenance['classifier']['max_radius_px'] == 24.0
+    assert provenance['training']['real_filter_weight'] == 0.5
+    assert built.real_filters is not None and built.real_filters.weight == 0.5
+    refused = subprocess.run(_train_command() + [
+        'build', str(tmp_path / 'y.npz'), str(crop_folder), '--real-filter-weight', '-1'],
+        capture_output=True, text=True, timeout=300, env=env)
+    assert refused.returncode != 0 and 'real_filter_weight must be >= 0' in refused.stderr
+    assert 'Traceback' not in refused.stderr and not (tmp_path / 'y.npz').exists()
     empty = tmp_path / 'empty'
     empty.mkdir()
     (empty / 'labels.csv').write_text('')

@@ -63,11 +63,8 @@ from speed_sign_detector.recognition.filter_banks import (  # noqa: F401 (re-exp
     build_banks,
 )
 from speed_sign_detector.recognition.second_opinion import SecondOpinion
-from speed_sign_detector.recognition.sign_features import (
-    FEATURE_SIZE,
-    aligned_patches,
-    sign_features,
-)
+from speed_sign_detector.recognition.sign_features import FEATURE_SIZE
+from speed_sign_detector.recognition.sign_reading import SignReading, read_signs
 from speed_sign_detector.recognition.trained_bank import (
     TrainedBank,
     load_trained_bank,
@@ -202,16 +199,14 @@ class Classifier:
         asked = [index for index, evidence in enumerate(found)
                  if isinstance(evidence, CorrelationEvidence)
                  and not self._withheld_by_filters(gray.shape, evidence, opinion)]
-        scores: list[np.ndarray | None] = [None] * len(found)
+        readings: list[SignReading | None] = [None] * len(found)
         if opinion is not None and asked:
-            signs = np.asarray([[found[i].x_px, found[i].y_px, found[i].radius_px]
-                                for i in asked])
-            for index, row in zip(asked, opinion.scores(sign_features(
-                    aligned_patches(gray, signs)))):
-                scores[index] = row
+            for index, reading in zip(asked, read_signs(self.trained_bank, gray,
+                                                        [found[i] for i in asked])):
+                readings[index] = reading
         return tuple(evidence if isinstance(evidence, Classification)
-                     else self._decide(gray, evidence, opinion_scores=row)
-                     for evidence, row in zip(found, scores))
+                     else self._decide(gray, evidence, reading=reading)
+                     for evidence, reading in zip(found, readings))
 
     def classify_crop(self, crop: np.ndarray, framing: str | None = None) -> Classification:
         """Classify a crop holding one centred sign.
@@ -356,13 +351,15 @@ class Classifier:
         return cut_px > config.max_cut_fraction * size_radius
 
     def _decide(self, gray: np.ndarray, evidence: CorrelationEvidence,
-                use_second_opinion: bool = True, opinion_scores: np.ndarray | None = None,
+                use_second_opinion: bool = True, reading: SignReading | None = None,
                 crop: bool = False) -> Classification:
         """The answer from the correlation evidence: the leading class (or the second
         opinion's choice among the leading classes), or "no sign" when the PSR or the lead
         is too small, the second opinion withholds it, or the sign is cut by the frame
-        border (not for a ``crop``). ``opinion_scores``: the second opinion's (C,) scores
-        of the sign when already computed."""
+        border (not for a ``crop``). The second opinion chooses among the leading labels of
+        the rendered and the real filters together where the bank has real filters.
+        ``reading``: :func:`~.sign_reading.read_signs`'s answer for the sign when already
+        computed."""
         config = self.config
         labels = [label_of_class(name) for name, _ in evidence.ranked]
         label = labels[0]
@@ -372,13 +369,12 @@ class Classifier:
         top_psr = evidence.ranked[0][1]
         withhold = self._withheld_by_filters(None if crop else gray.shape, evidence, opinion)
         if opinion is not None and not withhold:
-            scores = opinion_scores if opinion_scores is not None else opinion.scores(
-                sign_features(aligned_patches(gray, np.asarray([[frame_x, frame_y,
-                                                                  size_radius]]))))[0]
+            reading = reading or read_signs(self.trained_bank, gray, [evidence])[0]
             # a weak correlation peak needs a clearer second opinion
             min_lead = self.trained_bank.min_lead if top_psr >= config.psr_threshold else \
                 max(self.trained_bank.min_lead, config.second_opinion_low_psr_lead)
-            choice = opinion.choose(scores, labels, self.trained_bank.candidates, min_lead)
+            choice = opinion.choose(reading.opinion_scores, reading.ranking or labels,
+                                    self.trained_bank.candidates, min_lead)
             withhold = choice is None
             label = choice if choice is not None else label
         psr = next(p for (_, p), name in zip(evidence.ranked, labels) if name == label)

@@ -1,8 +1,9 @@
 """A trained bank: what training on labelled real crops adds to the rendered filters.
 
 It holds the second opinion (:mod:`.second_opinion`), the rule that decides with it,
-and the mean real examples of each class that join the renderings in the classification
-filters (:mod:`.filter_banks`). It is saved as one file with its provenance
+the composite filters trained from real crops that rank the labels it chooses among
+(:mod:`.real_filters`), and the mean real examples of each class that join the
+renderings in the classification filters (:mod:`.filter_banks`). It is saved as one file with its provenance
 (:mod:`.bank_file`): data folders, counts per class, parameters, package version.
 
 The package ships one, built by ``speed_sign_train build`` from the project's real data
@@ -19,15 +20,17 @@ import numpy as np
 
 from speed_sign_detector.errors import BankFileError
 from speed_sign_detector.recognition.bank_file import load_bank_file, save_bank_file
+from speed_sign_detector.recognition.real_filters import RealFilters
 from speed_sign_detector.recognition.second_opinion import SecondOpinion
 
 __all__ = ['DEFAULT_BANK_FILE', 'NO_BANK_FILE', 'TRAINED_BANK_FORMAT', 'TrainedBank',
            'load_trained_bank', 'resolve_bank_file', 'save_trained_bank']
 
 TRAINED_BANK_FORMAT = 'speed_sign_detector.trained_bank'
-TRAINED_BANK_VERSION = 3
-#: Versions this package reads: 2 (linear second opinion only) and 3 (linear or network).
-READABLE_BANK_VERSIONS = (2, TRAINED_BANK_VERSION)
+TRAINED_BANK_VERSION = 4
+#: Versions this package reads: 2 (linear second opinion only), 3 (linear or network)
+#: and 4 (with real filters).
+READABLE_BANK_VERSIONS = (2, 3, TRAINED_BANK_VERSION)
 #: The bank shipped with the package.
 DEFAULT_BANK_FILE = Path(__file__).resolve().parent / 'data' / 'default_bank.npz'
 #: ``classifier.bank_file`` value for the rendered templates alone (no trained bank).
@@ -45,6 +48,9 @@ class TrainedBank:
         class_examples: label -> (M, P, P) float32 mean real examples (canonical patches
             of :mod:`.sign_features`) joining that class's composite filters; may be empty.
         provenance: data folders, counts per class, parameters, package version.
+        real_filters: composite filters trained from real crops, whose PSR joins the
+            rendered filters' in ranking the labels the second opinion chooses among; or
+            ``None`` (the rendered filters rank alone).
     """
 
     second_opinion: SecondOpinion | None
@@ -52,6 +58,7 @@ class TrainedBank:
     min_lead: float = 0.2
     class_examples: dict[str, np.ndarray] = field(default_factory=dict)
     provenance: dict[str, Any] = field(default_factory=dict)
+    real_filters: RealFilters | None = None
 
 
 def resolve_bank_file(setting: str) -> Path | None:
@@ -79,8 +86,14 @@ def save_trained_bank(path: Path, bank: TrainedBank) -> None:
                           hidden_bias=opinion.hidden_bias)
     for label, examples in bank.class_examples.items():
         arrays[f'examples_{label}'] = np.asarray(examples, np.float16)
-    meta = dict(bank.provenance, decision={'candidates': bank.candidates,
-                                           'min_lead': bank.min_lead})
+    decision: dict[str, Any] = {'candidates': bank.candidates, 'min_lead': bank.min_lead}
+    if bank.real_filters is not None:
+        filters = bank.real_filters
+        arrays.update(real_filter_labels=np.asarray(filters.labels),
+                      real_filter_spectra=filters.spectra.astype(np.complex64))
+        decision.update(real_filter_weight=filters.weight,
+                        real_filter_inner_radius_px=filters.inner_radius_px)
+    meta = dict(bank.provenance, decision=decision)
     save_bank_file(path, arrays, meta, TRAINED_BANK_FORMAT, TRAINED_BANK_VERSION)
 
 
@@ -106,7 +119,15 @@ def load_trained_bank(path: Path) -> TrainedBank:
         examples = {name[len('examples_'):]: array.astype(np.float32)
                     for name, array in arrays.items() if name.startswith('examples_')}
         decision = meta['decision']
+        real_filters = None
+        if 'real_filter_spectra' in arrays:
+            real_filters = RealFilters(
+                tuple(str(n) for n in arrays['real_filter_labels']),
+                arrays['real_filter_spectra'].astype(np.complex64),
+                float(decision['real_filter_inner_radius_px']),
+                float(decision['real_filter_weight']))
         return TrainedBank(opinion, int(decision['candidates']), float(decision['min_lead']),
-                           examples, {k: v for k, v in meta.items() if k != 'decision'})
+                           examples, {k: v for k, v in meta.items() if k != 'decision'},
+                           real_filters)
     except (KeyError, ValueError, TypeError) as err:
         raise BankFileError(f'{path} is not a complete trained bank ({err})') from err

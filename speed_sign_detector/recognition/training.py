@@ -5,9 +5,12 @@ Training (:func:`train_bank`):
 1. The rendered-only classifier locates the sign in every crop (centre and radius, as
    it will at run time) and each sign is resampled to a canonical patch
    (:mod:`.sign_features`).
-2. Composite filters: the patches of each class are grouped (k-means) into a few mean
-   images, which join that class's renderings in its kth-law MACE filters at every size
-   (:mod:`.filter_banks`). Averaging keeps the filters stable with hundreds of examples.
+2. Composite filters trained from real crops (:mod:`.real_filters`): one OT-MACH filter
+   per label on the canonical patches of its crops, their degraded copies and the
+   renderings; their PSR joins the rendered filters' in ranking the labels the second
+   opinion chooses among. (Optionally, ``examples_per_class`` > 0: each class's patches
+   grouped by k-means into a few mean images that join its renderings in the kth-law MACE
+   filters at every size, :mod:`.filter_banks`; measured worse, off by default.)
 3. Second opinion: a model on gradient-orientation and pixel features
    (:mod:`.second_opinion`), by default an ensemble of small networks
    (:mod:`.opinion_network`), or a ridge model (``model='linear'``), trained on the
@@ -22,8 +25,9 @@ frames: whole-frame signs, and real background as ``no_sign``.
 Validation (:func:`cross_validate`): k folds by track (a physical sign is never on both
 sides), each fold's bank trained on the other folds, every crop answered by the bank
 that never saw its track; per-class accuracy, wrong-limit and withheld rates, and the
-look-alikes read as a limit, for the rendered-only classifier, the trained filters alone
-and the trained filters with the second opinion, side by side; with scenes also k folds
+look-alikes read as a limit, for the rendered-only classifier, the trained filters alone,
+the second opinion choosing among the rendered filters' leaders, and the whole trained
+bank (the real filters' ranking too), side by side; with scenes also k folds
 by scene (:mod:`.scene_validation`).
 """
 from __future__ import annotations
@@ -55,6 +59,7 @@ from speed_sign_detector.recognition.labelled_crops import (
     track_folds,
 )
 from speed_sign_detector.recognition.opinion_network import fit_network_opinion
+from speed_sign_detector.recognition.real_filters import train_real_filters
 from speed_sign_detector.recognition.scene_examples import (
     DetectedScene,
     SceneExamples,
@@ -110,6 +115,11 @@ class TrainingConfig:
         scene_copies: degraded copies of each example cut from annotated scenes
             (:mod:`.scene_examples`).
         second_opinion: train the second opinion at all.
+        real_filter_weight: weight of the composite filters trained from real crops
+            (:mod:`.real_filters`) in ranking the labels the second opinion chooses among,
+            against the rendered filters' 1 (0 = no real filters, the rendered ranking).
+        real_filter_noise: their trade-off's white-noise weight, relative to the mean
+            power of the examples.
         seed: seeds the augmentation, the k-means and the networks' training.
     """
 
@@ -125,6 +135,8 @@ class TrainingConfig:
     rendered_per_kind: int = 100
     scene_copies: int = 2
     second_opinion: bool = True
+    real_filter_weight: float = 0.25
+    real_filter_noise: float = 10.0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -134,7 +146,8 @@ class TrainingConfig:
         for name in ('hidden_units', 'epochs', 'members', 'candidates'):
             if getattr(self, name) < 1:
                 raise ValueError(f'{name} must be >= 1, got {getattr(self, name)}')
-        for name in ('augmented_copies', 'rendered_per_kind', 'scene_copies'):
+        for name in ('augmented_copies', 'rendered_per_kind', 'scene_copies',
+                     'real_filter_weight', 'real_filter_noise'):
             if getattr(self, name) < 0:
                 raise ValueError(f'{name} must be >= 0, got {getattr(self, name)}')
 
@@ -284,20 +297,29 @@ def train_from_located(located: LocatedCrops, config: TrainingConfig,
             members = patches[[i for i, name in enumerate(found_labels) if name == label]]
             examples[label] = _class_means(members, config.examples_per_class, rng)
     opinion = None
+    real_filters = None
     if config.second_opinion:
-        feature_rows = [sign_features(patches)]
-        feature_labels = list(found_labels)
+        # the patches both trained parts learn from: the crops, degraded copies of each
+        # (jittered in position and size), and the located renderings
+        patch_sets = [patches]
+        patch_labels = list(found_labels)
         for _ in range(config.augmented_copies):
-            copies = [aligned_patches(degraded(image, rng), jittered(sign, rng)[None])
-                      for image, sign, ok in zip(located.images, located.signs, found) if ok]
-            feature_rows.append(sign_features(np.concatenate(copies)))
-            feature_labels += found_labels
+            patch_sets.append(np.concatenate(
+                [aligned_patches(degraded(image, rng), jittered(sign, rng)[None])
+                 for image, sign, ok in zip(located.images, located.signs, found) if ok]))
+            patch_labels += found_labels
         if rendered is not None:
             usable = np.isfinite(rendered.signs[:, 0])
-            feature_rows.append(sign_features(np.concatenate(
+            patch_sets.append(np.concatenate(
                 [aligned_patches(image, sign[None]) for image, sign, ok in zip(
-                    rendered.images, rendered.signs, usable) if ok])))
-            feature_labels += [c.label for c, ok in zip(rendered.crops, usable) if ok]
+                    rendered.images, rendered.signs, usable) if ok]))
+            patch_labels += [c.label for c, ok in zip(rendered.crops, usable) if ok]
+        if config.real_filter_weight > 0:
+            real_filters = train_real_filters(np.concatenate(patch_sets), patch_labels,
+                                              config.real_filter_noise,
+                                              weight=config.real_filter_weight)
+        feature_rows = [sign_features(patch_set) for patch_set in patch_sets]
+        feature_labels = list(patch_labels)
         real_labels = set(found_labels)
         if scenes is not None and len(scenes):
             feature_rows.append(scenes.features)
@@ -321,7 +343,8 @@ def train_from_located(located: LocatedCrops, config: TrainingConfig,
                   counts_per_class=dict(sorted(counts_by_label.items())),
                   scene_examples=scenes.counts() if scenes is not None else {},
                   training=dataclasses.asdict(config), package_version=__version__)
-    return TrainedBank(opinion, config.candidates, config.min_lead, examples, record)
+    return TrainedBank(opinion, config.candidates, config.min_lead, examples, record,
+                       real_filters)
 
 
 def _rendered_classifier(config: ClassifierConfig) -> Classifier:
@@ -389,8 +412,11 @@ def train_bank(folders: Sequence[Path], classifier_config: ClassifierConfig = Cl
     return bank
 
 
-#: The variants :func:`cross_validate` compares.
-VARIANTS: tuple[str, ...] = ('rendered', 'trained_filters', 'trained_filters_second_opinion')
+#: The variants :func:`cross_validate` compares: the rendered filters alone; the trained
+#: bank without its second opinion; its second opinion choosing among the rendered
+#: filters' leaders (without the real filters' ranking); the whole trained bank.
+VARIANTS: tuple[str, ...] = ('rendered', 'trained_filters', 'second_opinion_rendered_ranking',
+                             'trained_filters_second_opinion')
 
 
 def answer_is_limit(label: str) -> bool:
@@ -491,6 +517,8 @@ def cross_validate(folders: Sequence[Path], folds: int = 5,
         bank = train_from_located(located.subset(train), config, rendered=rendered_crops,
                                   scenes=scenes)
         trained = Classifier(classifier_config, bank)
+        rendered_ranking = Classifier(classifier_config,
+                                      dataclasses.replace(bank, real_filters=None))
         for index in np.flatnonzero(~train):
             # without real examples in its composite filters the trained classifier
             # correlates with the rendered filters: their evidence stands
@@ -499,6 +527,8 @@ def cross_validate(folders: Sequence[Path], folds: int = 5,
             answers['trained_filters'][index] = trained.decide_crop(
                 images[index], evidence, use_second_opinion=False).label
             answers['trained_filters_second_opinion'][index] = trained.decide_crop(
+                images[index], evidence).label
+            answers['second_opinion_rendered_ranking'][index] = rendered_ranking.decide_crop(
                 images[index], evidence).label
             step(0, 0)
         done += int(train.sum())  # the steps of this fold's training crops

@@ -43,6 +43,11 @@ from speed_sign_detector.tools.progress import progress_bar
 from speed_sign_detector.tools.run_control import run_subcommand
 
 _DEFAULTS = TrainingConfig()
+#: Column titles of :func:`cross_validate`'s variants.
+_VARIANT_TITLES = {'rendered': 'renderings only',
+                   'trained_filters': 'trained, no second opinion',
+                   'second_opinion_rendered_ranking': 'opinion, rendered ranking',
+                   'trained_filters_second_opinion': 'trained bank (+ real filters)'}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -92,6 +97,15 @@ def build_parser() -> argparse.ArgumentParser:
                         'repeatable')
     common.add_argument('--scene-copies', type=int, default=_DEFAULTS.scene_copies,
                         help='degraded copies of each example cut from the scenes')
+    common.add_argument('--real-filter-weight', type=float,
+                        default=_DEFAULTS.real_filter_weight,
+                        help='weight of the composite filters trained from the real crops in '
+                             'ranking the labels the second opinion chooses among, against '
+                             'the rendered filters\' 1 (0: no real filters)')
+    common.add_argument('--real-filter-noise', type=float,
+                        default=_DEFAULTS.real_filter_noise,
+                        help='the real filters\' white-noise weight (OT-MACH trade-off), '
+                             'relative to the examples\' mean power')
     common.add_argument('--backend', choices=('auto', 'gl', 'numpy'), default='auto',
                         help='detector backend that finds the candidates in the scenes')
     common.add_argument('--no-second-opinion', action='store_true',
@@ -129,7 +143,9 @@ def _configs(args: argparse.Namespace
                                   examples_per_class=args.examples_per_class,
                                   rendered_per_kind=args.rendered_per_kind,
                                   scene_copies=args.scene_copies,
-                                  second_opinion=not args.no_second_opinion, seed=args.seed)
+                                  second_opinion=not args.no_second_opinion,
+                                  real_filter_weight=args.real_filter_weight,
+                                  real_filter_noise=args.real_filter_noise, seed=args.seed)
     except ValueError as err:
         raise SpeedSignError(f'invalid training setting: {err}') from err
     return classifier, training, pipeline.detector
@@ -191,7 +207,7 @@ def _run_validate(args: argparse.Namespace) -> int:
     finally:
         progress.close()
     print(f'{args.folds}-fold validation split by track, {report["crops"]} crops')
-    header = f'{"class":>13} ' + ' '.join(f'{v[:22]:>30}' for v in VARIANTS)
+    header = f'{"class":>13} ' + ' '.join(f'{_VARIANT_TITLES[v]:>30}' for v in VARIANTS)
     print(header)
     print(f'{"":>13} ' + ' '.join(f'{"right / wrong limit / none":>30}' for _ in VARIANTS))
     classes = list(report['variants'][VARIANTS[0]]['per_class'])
