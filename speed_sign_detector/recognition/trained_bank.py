@@ -3,8 +3,9 @@
 It holds the second opinion (:mod:`.second_opinion`), the rule that decides with it,
 the composite filters trained from real crops that rank the labels it chooses among
 (:mod:`.real_filters`), and the mean real examples of each class that join the
-renderings in the classification filters (:mod:`.filter_banks`). It is saved as one file with its provenance
-(:mod:`.bank_file`): data folders, counts per class, parameters, package version.
+renderings in the classification filters (:mod:`.filter_banks`). It is saved as one
+file with its provenance (:mod:`.bank_file`): data folders, counts per class,
+parameters, package version.
 
 The package ships one, built by ``speed_sign_train build`` from the project's real data
 (:data:`DEFAULT_BANK_FILE`); ``classifier.bank_file`` names another, or ``none`` for the
