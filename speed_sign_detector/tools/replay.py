@@ -16,7 +16,8 @@ timing (record-time gaps divided by ``--rate``):
 
 The topic is published under its recorded name, or ``--publish-as NAME``. By default
 the publisher waits up to ``--wait`` seconds for a subscriber before the first message,
-then half a second for the subscriber's side of discovery, so a node started at the same
+then half a second for the subscriber's side of discovery, and (reliable QoS) after the
+first message until every subscriber has acknowledged it, so a node started at the same
 time sees the whole drive. QoS: reliable, keep last
 ``--depth`` (compatible with the node's best-effort sensor-data subscription); pass
 ``--best-effort`` for sensor-data QoS. ROS arguments (``--ros-args -r ...``) are accepted.
@@ -124,12 +125,17 @@ def _play(bag: BagReader, topic: str, msgtype: str, args: argparse.Namespace) ->
         elif args.wait > 0:
             # The publisher sees the subscriber before the subscriber has matched the
             # publisher; DDS drops what is sent in between (the first frames, even reliable).
+            # A reliable publisher also waits, after the first message, until every
+            # subscriber has acknowledged it (_play_once): on a loaded machine the settle
+            # time alone was not enough.
             _spin_for(node, DISCOVERY_SETTLE_S)
         total = 0
         passes = 0
         while True:
             passes += 1
-            published, error = _play_once(bag, topic, message_class, publisher, node, args)
+            published, error = _play_once(bag, topic, message_class, publisher, node, args,
+                                          confirm_first=passes == 1 and args.wait > 0
+                                          and not args.best_effort)
             total += published
             if error is not None:
                 print(f'\nspeed_sign_replay: error: {error}', file=sys.stderr)
@@ -154,9 +160,25 @@ def _spin_for(node: Any, seconds: float) -> None:
         rclpy.spin_once(node, timeout_sec=0.05)
 
 
+def _confirm_delivery(publisher: Any, node: Any, timeout_s: float) -> None:
+    """Wait until every subscriber has acknowledged what ``publisher`` sent (a warning
+    through ``node``'s logger after ``timeout_s`` seconds)."""
+    from rclpy.duration import Duration
+
+    if not publisher.wait_for_all_acked(Duration(nanoseconds=int(timeout_s * 1e9))):
+        node.get_logger().warning(f'the first message on {publisher.topic_name} was not '
+                                  f'acknowledged within {timeout_s:g} s; playing on')
+
+
 def _play_once(bag: BagReader, topic: str, message_class: type, publisher: Any, node: Any,
-               args: argparse.Namespace) -> tuple[int, BagError | None]:
-    """One pass over the bag with the recorded timing; returns (published, error)."""
+               args: argparse.Namespace, confirm_first: bool = False
+               ) -> tuple[int, BagError | None]:
+    """One pass over the bag with the recorded timing; returns (published, error).
+
+    ``confirm_first``: after the first message, wait (up to ``args.wait`` seconds) until
+    every matched subscriber has acknowledged it, i.e. has matched the publisher too; the
+    recorded timing then starts from there.
+    """
     first_log_ns: int | None = None
     started = time.monotonic()
     started_clock_ns = node.get_clock().now().nanoseconds
@@ -178,6 +200,10 @@ def _play_once(bag: BagReader, topic: str, message_class: type, publisher: Any, 
                 publisher.publish(to_rclpy(item, message_class, started_clock_ns + offset_ns
                                            if args.restamp else None))
             published += 1
+            if confirm_first and published == 1:
+                _confirm_delivery(publisher, node, args.wait)
+                started = time.monotonic() - offset_ns * 1e-9
+                started_clock_ns = node.get_clock().now().nanoseconds - offset_ns
             if progress and published % 10 == 0:
                 print(f'\r{published} messages', end='', file=sys.stderr, flush=True)
     except BagError as err:
