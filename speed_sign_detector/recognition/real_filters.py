@@ -25,6 +25,7 @@ not rank.
 """
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -166,12 +167,21 @@ def fused_label_order(ranked: Sequence[tuple[str, float]], filters: RealFilters,
     return sorted(fused, key=lambda label: -fused[label])
 
 
-def _patch_spectra(patches: np.ndarray, inner_radius_px: float) -> np.ndarray:
-    """(N, 64, 33) complex spectra of the patches' inner discs, each at zero mean and
-    unit energy inside the disc."""
+@functools.lru_cache(maxsize=4)
+def _inner_disc(inner_radius_px: float) -> np.ndarray:
+    """(48, 48) float32 mask of the patch's inner disc (built once per radius: the
+    classifier asks for it on every frame)."""
     centre = (PATCH_PX - 1) / 2.0
     rows, columns = np.mgrid[:PATCH_PX, :PATCH_PX]
     disc = (np.hypot(rows - centre, columns - centre) <= inner_radius_px).astype(np.float32)
+    disc.setflags(write=False)
+    return disc
+
+
+def _patch_spectra(patches: np.ndarray, inner_radius_px: float) -> np.ndarray:
+    """(N, 64, 33) complex spectra of the patches' inner discs, each at zero mean and
+    unit energy inside the disc."""
+    disc = _inner_disc(float(inner_radius_px))
     inside = patches * disc
     mean = inside.sum(axis=(1, 2), keepdims=True) / disc.sum()
     centred = (patches - mean) * disc
