@@ -160,14 +160,20 @@ def _spin_for(node: Any, seconds: float) -> None:
         rclpy.spin_once(node, timeout_sec=0.05)
 
 
-def _confirm_delivery(publisher: Any, node: Any, timeout_s: float) -> None:
-    """Wait until every subscriber has acknowledged what ``publisher`` sent (a warning
-    through ``node``'s logger after ``timeout_s`` seconds)."""
+def confirm_delivery(publisher: Any, node: Any, timeout_s: float) -> bool:
+    """Wait until every subscriber has acknowledged what ``publisher`` (reliable) sent.
+
+    Returns:
+        True when all did within ``timeout_s`` seconds; else False, with a warning
+        through ``node``'s logger (the replay plays on).
+    """
     from rclpy.duration import Duration
 
-    if not publisher.wait_for_all_acked(Duration(nanoseconds=int(timeout_s * 1e9))):
-        node.get_logger().warning(f'the first message on {publisher.topic_name} was not '
-                                  f'acknowledged within {timeout_s:g} s; playing on')
+    if publisher.wait_for_all_acked(Duration(nanoseconds=int(timeout_s * 1e9))):
+        return True
+    node.get_logger().warning(f'the first message on {publisher.topic_name} was not '
+                              f'acknowledged within {timeout_s:g} s; playing on')
+    return False
 
 
 def _play_once(bag: BagReader, topic: str, message_class: type, publisher: Any, node: Any,
@@ -201,7 +207,7 @@ def _play_once(bag: BagReader, topic: str, message_class: type, publisher: Any, 
                                            if args.restamp else None))
             published += 1
             if confirm_first and published == 1:
-                _confirm_delivery(publisher, node, args.wait)
+                confirm_delivery(publisher, node, args.wait)
                 started = time.monotonic() - offset_ns * 1e-9
                 started_clock_ns = node.get_clock().now().nanoseconds - offset_ns
             if progress and published % 10 == 0:
