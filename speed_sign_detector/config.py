@@ -226,8 +226,9 @@ class ClassifierConfig:
         '6.7-10, clutter mostly 4-5.6: the retry then costs little more than the detection '
         'filters).', low=0.0, high=1000.0)
     larger_size_retry_min_psr: float = setting(
-        12.0, 'Least PSR of an answer of the larger-size retry: a second look at another '
-        'size needs clearer evidence (large round clutter matched a limit at PSR 9-11).',
+        12.0, 'Least PSR of an answer of the larger-size retry (and of a crop\'s second '
+        'looks: the padded and the framed retry): a second look needs clearer evidence '
+        '(large round clutter matched a limit at PSR 9-11).',
         low=0.0, high=1000.0)
     position_search: float = setting(0.35, 'Peak search half-width around the candidate '
                                      'centre, as a fraction of its radius.', low=0.0,
@@ -266,6 +267,16 @@ class ClassifierConfig:
                                 'larger_size_retry_min_psr; as accurate as the right '
                                 'framing on GTSRB crops, at twice the time per crop).',
                                 choices=('auto', 'margin', 'tight', 'padded'))
+    crop_framed_retry: bool = setting(
+        True, 'A crop read as no sign is correlated once more with the detection filters held '
+        'to its framing\'s centre and size (the free search sometimes settles on a larger '
+        'size or another centre), and read where its PSR reaches larger_size_retry_min_psr.')
+    crop_retry_size_search_ratio: float = setting(
+        1.1, 'Framed retry: detection filters of radii within this factor of the framing\'s '
+        'radius.', low=1.0, high=4.0)
+    crop_retry_position_search: float = setting(
+        0.12, 'Framed retry: peak search half-width around the crop\'s centre, fraction of '
+        'the radius.', low=0.0, high=2.0)
     bank_file: str = setting('', 'Trained filter bank file (speed_sign_train build): real '
                              'examples in the composite filters and the second opinion. '
                              '"" = the bank shipped with the package, "none" = rendered '

@@ -55,6 +55,12 @@ from speed_sign_detector.recognition.crop_framing import (  # noqa: F401 (re-exp
     crop_sign_radius,
     padded_fallback_radius,
 )
+from speed_sign_detector.recognition.crop_reading import (
+    clearest,
+    crop_positions,
+    decide_crop,
+    framed_search_config,
+)
 from speed_sign_detector.recognition.filter_banks import (  # noqa: F401 (re-exported)
     CLASS_TEMPLATES,
     SPEED_LIMITS_KMH,
@@ -108,6 +114,7 @@ class Classifier:
         self.banks: tuple[SizeBank, ...] = build_banks(config, trained_bank.class_examples)
         self.build_time_s = time.perf_counter() - start
         self._evidence = EvidenceSearch(config, self.banks)
+        self._framed_evidence = EvidenceSearch(framed_search_config(config), self.banks)
         _LOG.debug('classifier banks: %d sizes, %.1f MB, %.2f s', len(self.banks),
                    self.bank_nbytes / 1e6, self.build_time_s)
 
@@ -155,14 +162,14 @@ class Classifier:
                 gray, self.candidate_positions([candidates[i] for i in retried], retry=True),
                 self.config.larger_size_retry_min_detection_psr)
             for index, answer in zip(retried, second):
-                if self._second_look_stands(answer):
+                if self.second_look_stands(answer):
                     answers[index] = answer
         return tuple(answers)
 
-    def _second_look_stands(self, answer: Classification) -> bool:
-        """True when an answer from a second look at another size (the larger-size retry
-        of :meth:`classify`, the padded fallback of :meth:`decide_crop`) replaces "no
-        sign": it names a sign with a PSR of at least ``larger_size_retry_min_psr`` (a
+    def second_look_stands(self, answer: Classification) -> bool:
+        """True when an answer from a second look (the larger-size retry of
+        :meth:`classify`, a crop's padded and framed retries, :mod:`.crop_reading`)
+        replaces "no sign": it names a sign with a PSR of at least ``larger_size_retry_min_psr`` (a
         second look needs clearer evidence: large round clutter matched a limit at PSR
         9-11, and at PSR 8 a dark GTSRB track of 60s was read as 80 at the padded size)."""
         return (answer.label != LABEL_NO_SIGN
@@ -240,23 +247,19 @@ class Classifier:
         crop often finds its ring more clearly, and the classification at that size
         suffers.)"""
         crop = _check_gray(crop, 'crop')
-        height, width = crop.shape
-        framing = framing or self.config.crop_framing
-        framings = AUTO_FRAMINGS if framing == 'auto' else (framing,)
-        found = self.evidence_for_candidates(
-            crop, [(width / 2.0, height / 2.0, crop_sign_radius(crop.shape, name))
-                   for name in framings])
-        return max(found, key=_classification_psr)  # the first of equals wins
+        return clearest(self.evidence_for_candidates(
+            crop, crop_positions(crop.shape, framing or self.config.crop_framing)))
 
     def decide_crop(self, crop: np.ndarray, evidence: CorrelationEvidence | Classification,
                     framing: str | None = None, use_second_opinion: bool = True
                     ) -> Classification:
         """The answer for a crop from its :meth:`crop_evidence` (as :meth:`decide` with
-        ``crop=True``). With ``'auto'`` framing, a small crop answered "no sign" is
-        correlated once more at its ``'padded'`` radius (a 10% margin without GTSRB's
-        least 5 pixels, as tools that pad boxes in proportion cut them), and that answer
-        stands where it names a sign with a PSR of at least
-        ``larger_size_retry_min_psr``.
+        ``crop=True``). A crop answered "no sign" gets second looks
+        (:func:`.crop_reading.decide_crop`): with ``'auto'`` framing a small crop at its
+        ``'padded'`` radius (a 10% margin without GTSRB's least 5 pixels, as tools that pad
+        boxes in proportion cut them), and with ``crop_framed_retry`` every crop with the
+        search held to its framing's centre and size; such an answer stands where it names
+        a sign with a PSR of at least ``larger_size_retry_min_psr``.
 
         Args:
             crop: (h, w) uint8 gray crop.
@@ -265,16 +268,8 @@ class Classifier:
                 ``config.crop_framing``).
             use_second_opinion: ``False`` decides by the correlation filters alone.
         """
-        answer = self.decide(crop, evidence, use_second_opinion, crop=True)
-        if answer.label != LABEL_NO_SIGN or (framing or self.config.crop_framing) != 'auto':
-            return answer
-        radius = padded_fallback_radius(crop.shape)
-        if radius is None:
-            return answer
-        height, width = crop.shape
-        (padded,) = self.evidence_for_candidates(crop, [(width / 2.0, height / 2.0, radius)])
-        second = self.decide(crop, padded, use_second_opinion, crop=True)
-        return second if self._second_look_stands(second) else answer
+        return decide_crop(self, crop, evidence, framing or self.config.crop_framing,
+                           use_second_opinion)
 
     def decide(self, gray: np.ndarray, evidence: CorrelationEvidence | Classification,
                use_second_opinion: bool = True, crop: bool = False) -> Classification:
@@ -306,7 +301,8 @@ class Classifier:
 
     def evidence_for_candidates(self, gray: np.ndarray,
                                 positions: Sequence[tuple[float, float, float]],
-                                detection_psr_threshold: float | None = None
+                                detection_psr_threshold: float | None = None,
+                                held_to_framing: bool = False
                                 ) -> list[CorrelationEvidence | Classification]:
         """:meth:`evidence_at` for several signs of one image, correlated together (the
         same answers, faster).
@@ -317,13 +313,16 @@ class Classifier:
             detection_psr_threshold: least PSR of the best detection filter for the
                 classification filters to run, "no sign" below (default and at least
                 ``config.detection_psr_threshold``).
+            held_to_framing: search sizes and centres as a crop's framed retry does
+                (``crop_retry_size_search_ratio``, ``crop_retry_position_search``).
 
         Returns:
             One result per position, in order.
         """
         found: list[CorrelationEvidence | Classification] = []
+        search = self._framed_evidence if held_to_framing else self._evidence
         for (x_px, y_px, radius_px), evidence in zip(
-                positions, self._evidence.evidence(gray, positions, detection_psr_threshold),
+                positions, search.evidence(gray, positions, detection_psr_threshold),
                 strict=True):
             if isinstance(evidence, NoSignFound):
                 evidence = self._no_sign(float(x_px), float(y_px), float(radius_px),
@@ -391,11 +390,6 @@ class Classifier:
                                   frame_x, frame_y)
         return Classification(label, int(label) if label.isdigit() else None, psr,
                               size_radius, roll, margin, frame_x, frame_y)
-
-
-def _classification_psr(found: CorrelationEvidence | Classification) -> float:
-    """The leading classification PSR of evidence; -inf where no sign was found."""
-    return found.ranked[0][1] if isinstance(found, CorrelationEvidence) else -math.inf
 
 
 def _check_gray(image: np.ndarray, name: str) -> np.ndarray:

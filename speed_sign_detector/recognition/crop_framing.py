@@ -12,8 +12,8 @@ Crops come framed three ways:
 
 ``'auto'`` (:meth:`~speed_sign_detector.recognition.classifier.Classifier.crop_evidence`)
 correlates the ``'margin'`` and ``'tight'`` radii and keeps the clearer classification; a
-small crop that it answers "no sign" is tried once more as ``'padded'``
-(:meth:`~speed_sign_detector.recognition.classifier.Classifier.decide_crop`).
+small crop that it answers "no sign" is tried once more as ``'padded'``, and any crop so
+answered once more with the search held to its framing (:mod:`.crop_reading`).
 """
 from __future__ import annotations
 
