@@ -133,7 +133,7 @@ class EvidenceSearch:
             positions: (x, y, radius) of each expected sign: centre and radius in image
                 pixels.
             detection_psr_threshold: least detection PSR for the classification filters
-                to run (default and at least: ``config.detection_psr_threshold``).
+                to run (default: ``config.detection_psr_threshold``).
 
         Returns:
             Per position, in order: the ranked class scores with the sign's measured
@@ -143,7 +143,8 @@ class EvidenceSearch:
                     for x_px, y_px, radius_px in positions]
         searched = [p for p in prepared if isinstance(p, _Position)]
         self._detect(searched)
-        threshold = max(self.config.detection_psr_threshold, detection_psr_threshold or 0.0)
+        threshold = (self.config.detection_psr_threshold if detection_psr_threshold is None
+                     else detection_psr_threshold)
         located = [p for p in searched if p.detection_psr >= threshold]
         self._classify(located)
         return [p if isinstance(p, NoSignFound) else self._result(p, threshold)

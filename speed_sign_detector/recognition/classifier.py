@@ -160,7 +160,8 @@ class Classifier:
         if retried:
             second = self._classify_at(
                 gray, self.candidate_positions([candidates[i] for i in retried], retry=True),
-                self.config.larger_size_retry_min_detection_psr)
+                max(self.config.detection_psr_threshold,
+                    self.config.larger_size_retry_min_detection_psr))
             for index, answer in zip(retried, second):
                 if self.second_look_stands(answer):
                     answers[index] = answer
@@ -238,17 +239,21 @@ class Classifier:
         crop = _check_gray(crop, 'crop')
         return self.decide_crop(crop, self.crop_evidence(crop, framing), framing)
 
-    def crop_evidence(self, crop: np.ndarray, framing: str | None = None
+    def crop_evidence(self, crop: np.ndarray, framing: str | None = None,
+                      detection_psr_threshold: float | None = None
                       ) -> CorrelationEvidence | Classification:
         """:meth:`evidence_at` for a crop framed as :meth:`classify_crop` takes it; for
         ``'auto'`` framing the ``'margin'`` and ``'tight'`` framings are tried and the one
         whose best classification filter matches more clearly (higher PSR) wins. (The
         detection filters' PSR is a worse judge: a filter larger than the sign of a margin
         crop often finds its ring more clearly, and the classification at that size
-        suffers.)"""
+        suffers.) The detection gate is ``detection_psr_threshold`` (default
+        ``crop_detection_psr_threshold``, see :mod:`.crop_reading`)."""
         crop = _check_gray(crop, 'crop')
+        gate = (self.config.crop_detection_psr_threshold if detection_psr_threshold is None
+                else detection_psr_threshold)
         return clearest(self.evidence_for_candidates(
-            crop, crop_positions(crop.shape, framing or self.config.crop_framing)))
+            crop, crop_positions(crop.shape, framing or self.config.crop_framing), gate))
 
     def decide_crop(self, crop: np.ndarray, evidence: CorrelationEvidence | Classification,
                     framing: str | None = None, use_second_opinion: bool = True
@@ -311,8 +316,9 @@ class Classifier:
             gray: (H, W) uint8 image.
             positions: (x, y, radius) of each sign, pixels.
             detection_psr_threshold: least PSR of the best detection filter for the
-                classification filters to run, "no sign" below (default and at least
-                ``config.detection_psr_threshold``).
+                classification filters to run, "no sign" below (default
+                ``config.detection_psr_threshold``; crops use
+                ``config.crop_detection_psr_threshold``).
             held_to_framing: search sizes and centres as a crop's framed retry does
                 (``crop_retry_size_search_ratio``, ``crop_retry_position_search``).
 

@@ -159,7 +159,8 @@ class LocatedCrops:
 
     Attributes:
         crops: the labelled crops.
-        signs: (N, 3) float64 (x, y, radius) in crop pixels; NaN where none was found.
+        signs: (N, 3) float64 (x, y, radius) in crop pixels; NaN where none was found
+            clearly enough to train on (:func:`locate_signs`).
         images: the (h, w) uint8 gray crops.
         evidence: what the rendered-only classifier measured in each crop
             (:meth:`Classifier.crop_evidence`), so that answers from the same filters need
@@ -215,13 +216,24 @@ def read_crops(folders: Sequence[Path]) -> tuple[list[LabelledCrop], list[np.nda
 def locate_signs(classifier: Classifier, crops: Sequence[LabelledCrop],
                  images: Sequence[np.ndarray], progress: ProgressCallback | None = None
                  ) -> LocatedCrops:
-    """Where ``classifier`` finds the sign in each crop (:meth:`Classifier.crop_evidence`)."""
+    """Where ``classifier`` finds the sign in each crop (:meth:`Classifier.crop_evidence`).
+
+    The evidence of every crop, as reading finds it, is kept for validation. The sign's
+    position (``signs``, what training learns from) is located with the frames' gate
+    ``detection_psr_threshold``: crops are read from the lower
+    ``crop_detection_psr_threshold``, but a weakly found ring locates the sign less
+    exactly, and training keeps to the clearly found ones."""
     signs = np.full((len(crops), 3), np.nan)
     found: list[CorrelationEvidence | Classification] = []
+    training_gate = classifier.config.detection_psr_threshold
     for index, image in enumerate(images):
         evidence = classifier.crop_evidence(image)
-        if isinstance(evidence, CorrelationEvidence):
-            signs[index] = (evidence.x_px, evidence.y_px, evidence.radius_px)
+        located = evidence
+        if isinstance(evidence, CorrelationEvidence) and evidence.detection_psr < training_gate:
+            # the clearest framing has a weak ring: the clearest of the others, if any
+            located = classifier.crop_evidence(image, detection_psr_threshold=training_gate)
+        if isinstance(located, CorrelationEvidence):
+            signs[index] = (located.x_px, located.y_px, located.radius_px)
         found.append(evidence)
         if progress is not None:
             progress(index + 1, len(images))
