@@ -197,9 +197,10 @@ class ClassifierConfig:
                                              'loses ~0.2% of real signs).', low=0.0,
                                              high=1000.0)
     crop_detection_psr_threshold: float = setting(
-        2.5, 'The same gate for crops (classify_crop), which frame a sign: signs whose ring '
-        'the detection filters find weakly (backlit, dark) are still read by the '
-        'classification filters (on gtsrb-dev 14 more limit crops read right, none wrong).',
+        2.5, 'The same gate for crops (classify_crop), which frame a sign, with a trained '
+        'second opinion: signs whose ring the detection filters find weakly (backlit, dark) '
+        'are still read, where the answer\'s PSR reaches psr_threshold (on gtsrb-dev 14 more '
+        'limit crops read right, none wrong).',
         low=0.0, high=1000.0)
     max_cut_fraction: float = setting(0.2, 'A sign whose disc reaches beyond the frame '
                                       'border by more than this fraction of its radius is '

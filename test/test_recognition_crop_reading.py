@@ -112,6 +112,7 @@ def test_a_crop_whose_ring_is_found_weakly_is_read(shared_data_dir: Path,
                                                    classifier: Classifier, name: str) -> None:
     crop = _crop(shared_data_dir, name)
     config = classifier.config
+    assert classifier.crop_detection_gate == config.crop_detection_psr_threshold
     evidence = classifier.crop_evidence(crop)
     assert isinstance(evidence, CorrelationEvidence)
     assert config.crop_detection_psr_threshold <= evidence.detection_psr \
@@ -143,3 +144,13 @@ def test_training_locates_signs_with_the_frames_gate(shared_data_dir: Path,
     # read (the evidence validation uses), but not a training example
     assert all(isinstance(evidence, CorrelationEvidence) for evidence in located.evidence)
     assert np.isnan(located.signs).all()
+
+
+@pytest.mark.slow
+def test_the_renderings_alone_keep_the_frames_gate(shared_data_dir: Path,
+                                                   config: ClassifierConfig) -> None:
+    rendered = Classifier(dataclasses.replace(config, bank_file='none'))
+    assert rendered.crop_detection_gate == config.detection_psr_threshold
+    for name in sorted(WEAK_RING_CROPS):
+        assert not isinstance(rendered.crop_evidence(_crop(shared_data_dir, name)),
+                              CorrelationEvidence)

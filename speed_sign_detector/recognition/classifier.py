@@ -248,12 +248,21 @@ class Classifier:
         detection filters' PSR is a worse judge: a filter larger than the sign of a margin
         crop often finds its ring more clearly, and the classification at that size
         suffers.) The detection gate is ``detection_psr_threshold`` (default
-        ``crop_detection_psr_threshold``, see :mod:`.crop_reading`)."""
+        :attr:`crop_detection_gate`)."""
         crop = _check_gray(crop, 'crop')
-        gate = (self.config.crop_detection_psr_threshold if detection_psr_threshold is None
-                else detection_psr_threshold)
+        gate = self.crop_detection_gate if detection_psr_threshold is None \
+            else detection_psr_threshold
         return clearest(self.evidence_for_candidates(
             crop, crop_positions(crop.shape, framing or self.config.crop_framing), gate))
+
+    @property
+    def crop_detection_gate(self) -> float:
+        """The least detection PSR at which a crop's classification filters run:
+        ``crop_detection_psr_threshold`` with a trained second opinion, else the frames'
+        ``detection_psr_threshold`` (see :mod:`.crop_reading`)."""
+        if self.trained_bank.second_opinion is None:
+            return self.config.detection_psr_threshold
+        return self.config.crop_detection_psr_threshold
 
     def decide_crop(self, crop: np.ndarray, evidence: CorrelationEvidence | Classification,
                     framing: str | None = None, use_second_opinion: bool = True
@@ -318,7 +327,7 @@ class Classifier:
             detection_psr_threshold: least PSR of the best detection filter for the
                 classification filters to run, "no sign" below (default
                 ``config.detection_psr_threshold``; crops use
-                ``config.crop_detection_psr_threshold``).
+                :attr:`crop_detection_gate`).
             held_to_framing: search sizes and centres as a crop's framed retry does
                 (``crop_retry_size_search_ratio``, ``crop_retry_position_search``).
 
