@@ -94,8 +94,7 @@ def decide_crop(classifier: Classifier, crop: np.ndarray,
         framing: the framing ``evidence`` was found with.
         use_second_opinion: ``False`` decides by the correlation filters alone.
     """
-    answer = _weak_ring_checked(classifier, evidence, classifier.decide(
-        crop, evidence, use_second_opinion, crop=True))
+    answer = _read(classifier, crop, evidence, use_second_opinion)
     if answer.label != LABEL_NO_SIGN:
         return answer
     height, width = crop.shape
@@ -104,25 +103,26 @@ def decide_crop(classifier: Classifier, crop: np.ndarray,
     if radius is not None:
         (padded,) = classifier.evidence_for_candidates(
             crop, [(width / 2.0, height / 2.0, radius)], gate)
-        second = _weak_ring_checked(classifier, padded, classifier.decide(
-            crop, padded, use_second_opinion, crop=True))
+        second = _read(classifier, crop, padded, use_second_opinion)
         if classifier.second_look_stands(second):
             return second
     if classifier.config.crop_framed_retry:
         held = clearest(classifier.evidence_for_candidates(
             crop, crop_positions(crop.shape, framing), gate, held_to_framing=True))
-        second = _weak_ring_checked(classifier, held, classifier.decide(
-            crop, held, use_second_opinion, crop=True))
+        second = _read(classifier, crop, held, use_second_opinion)
         if classifier.second_look_stands(second):
             return second
     return answer
 
 
-def _weak_ring_checked(classifier: Classifier, evidence: CorrelationEvidence | Classification,
-                       answer: Classification) -> Classification:
-    """``answer``, or "no sign" where the detection filters found the sign's ring weakly
-    (a detection PSR under ``detection_psr_threshold``, the frames' gate) and the answer's
-    PSR is under ``psr_threshold``: a weak ring needs a clear reading."""
+def _read(classifier: Classifier, crop: np.ndarray,
+          evidence: CorrelationEvidence | Classification,
+          use_second_opinion: bool) -> Classification:
+    """One look's answer (:meth:`~.classifier.Classifier.decide` for a crop), or "no sign"
+    where the detection filters found the sign's ring weakly (a detection PSR under
+    ``detection_psr_threshold``, the frames' gate) and the answer's PSR is under
+    ``psr_threshold``: a weak ring needs a clear reading."""
+    answer = classifier.decide(crop, evidence, use_second_opinion, crop=True)
     config = classifier.config
     if (isinstance(evidence, CorrelationEvidence)
             and evidence.detection_psr < config.detection_psr_threshold
