@@ -13,7 +13,7 @@ import pytest
 from speed_sign_detector.config import ClassifierConfig, ConfigError, from_parameters
 from speed_sign_detector.recognition.candidate_evidence import CorrelationEvidence
 from speed_sign_detector.recognition.classifier import Classifier
-from speed_sign_detector.recognition.crop_framing import crop_sign_radius
+from speed_sign_detector.recognition.crop_framing import auto_framings, crop_sign_radius
 from speed_sign_detector.recognition.crop_reading import crop_positions, framed_search_config
 from speed_sign_detector.recognition.labelled_crops import LabelledCrop
 from speed_sign_detector.recognition.training import locate_signs
@@ -51,10 +51,24 @@ def _crop(shared_data_dir: Path, name: str) -> np.ndarray:
 
 def test_crop_positions_follow_the_framing() -> None:
     shape = (40, 50)
-    assert crop_positions(shape, 'tight') == [(25.0, 20.0, crop_sign_radius(shape, 'tight'))]
-    assert crop_positions(shape, 'auto') == [
+    assert crop_positions(shape, 'tight', 5.0) == [
+        (25.0, 20.0, crop_sign_radius(shape, 'tight'))]
+    assert crop_positions(shape, 'auto', 5.0) == [
         (25.0, 20.0, crop_sign_radius(shape, 'margin')),
         (25.0, 20.0, crop_sign_radius(shape, 'tight'))]
+
+
+def test_auto_framing_of_a_crop_too_small_for_gtsrb_margins() -> None:
+    # GTSRB's 5 px margins leave a 19 px crop a sign of radius 4.5 px, under the least
+    # radius read (5 px): 'auto' compares a margin in proportion and none instead
+    assert crop_sign_radius((19, 19), 'margin') == 4.5
+    assert auto_framings((19, 19), 5.0) == ('padded', 'tight')
+    assert auto_framings((20, 20), 5.0) == ('margin', 'tight')
+    assert auto_framings((19, 19), 4.5) == ('margin', 'tight')
+    assert [radius for _, _, radius in crop_positions((19, 19), 'auto', 5.0)] == [
+        crop_sign_radius((19, 19), 'padded'), 9.5]
+    # an explicit framing stands whatever the size
+    assert crop_positions((19, 19), 'margin', 5.0) == [(9.5, 9.5, 4.5)]
 
 
 def test_the_framed_search_holds_size_and_position() -> None:
@@ -81,7 +95,7 @@ def test_invalid_retry_settings_are_rejected(values: dict, message: str) -> None
 def test_the_held_search_stays_on_the_framed_sign(shared_data_dir: Path,
                                                   classifier: Classifier, name: str) -> None:
     crop = _crop(shared_data_dir, name)
-    (x_px, y_px, radius_px), = crop_positions(crop.shape, 'margin')
+    (x_px, y_px, radius_px), = crop_positions(crop.shape, 'margin', 5.0)
     (free,) = classifier.evidence_for_candidates(crop, [(x_px, y_px, radius_px)])
     (held,) = classifier.evidence_for_candidates(crop, [(x_px, y_px, radius_px)],
                                                  held_to_framing=True)

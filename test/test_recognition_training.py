@@ -27,7 +27,10 @@ from speed_sign_detector.recognition.classifier import (
     CorrelationEvidence,
     crop_sign_radius,
 )
-from speed_sign_detector.recognition.crop_framing import padded_fallback_radius
+from speed_sign_detector.recognition.crop_framing import (
+    auto_framings,
+    padded_fallback_radius,
+)
 from speed_sign_detector.recognition.filter_banks import bank_radii, build_banks
 from speed_sign_detector.recognition.labelled_crops import read_crop_folder, track_folds
 from speed_sign_detector.recognition.second_opinion import (
@@ -222,22 +225,20 @@ def test_tight_and_margin_crops(trained: TrainedBank, framing: str) -> None:
 @pytest.mark.parametrize('kind', ['30', '50', '80', '120'])
 def test_small_crop_padded_in_proportion_is_read_by_auto(kind: str) -> None:
     # a 13 px sign with 2 px around it (a 17 px crop, padded in proportion as some tools
-    # cut boxes): GTSRB's least margin of 5 px makes 'margin' expect a 3.5 px radius, and
-    # 'tight' 8.5 px; the 'padded' fallback of 'auto' looks at 7.1 px
+    # cut boxes): GTSRB's least margin of 5 px makes 'margin' expect a 3.5 px radius (too
+    # small to read), and 'tight' 8.5 px; 'auto' compares 'padded' (7.1 px) and 'tight'
     crop = crop_of(kind, 13, 2, seed=1)
     classifier = Classifier(SMALL)
     assert classifier.classify_crop(crop, 'margin').label == 'no_sign'
     assert classifier.classify_crop(crop, 'tight').label == 'no_sign'
-    evidence = classifier.crop_evidence(crop, 'auto')
-    assert classifier.decide(crop, evidence, crop=True).label == 'no_sign'  # no fallback
+    assert auto_framings(crop.shape, SMALL.min_sign_radius_px) == ('padded', 'tight')
     padded = classifier.classify_crop(crop, 'padded')
     assert padded.label == kind
-    assert padded.psr >= SMALL.larger_size_retry_min_psr
-    answer = classifier.classify_crop(crop, 'auto')
-    assert answer == padded
-    assert abs(answer.radius_px - 6.5) < 1.5
-    assert classifier.decide_crop(crop, evidence) == padded
-    # the filters alone, as cross-validation asks them, take the fallback too
+    evidence = classifier.crop_evidence(crop, 'auto')
+    assert classifier.decide(crop, evidence, crop=True) == padded  # the first look reads it
+    assert classifier.classify_crop(crop, 'auto') == padded
+    assert abs(padded.radius_px - 6.5) < 1.5
+    # the filters alone, as cross-validation asks them, read it too
     assert classifier.decide_crop(crop, evidence, use_second_opinion=False).label == kind
     assert crop_sign_radius(crop.shape, 'padded') == pytest.approx(17 / 1.2 / 2)
     assert padded_fallback_radius(crop.shape) == pytest.approx(17 / 1.2 / 2)
@@ -246,18 +247,24 @@ def test_small_crop_padded_in_proportion_is_read_by_auto(kind: str) -> None:
     assert crop_sign_radius((72, 72), 'padded') == crop_sign_radius((72, 72), 'margin')
 
 
-@pytest.mark.parametrize('kind', ['80', '120'])
+@pytest.mark.parametrize('kind', ['50', '80'])
 def test_padded_fallback_needs_a_clear_peak(kind: str) -> None:
-    # a 12 px sign: 'padded' reads it, but below larger_size_retry_min_psr, and 'auto'
-    # withholds it (a second look at another size needs clearer evidence)
-    crop = crop_of(kind, 12, 2, seed=1)
-    classifier = Classifier(SMALL)
+    # an 18 px sign with 2 px around it (a 22 px crop): 'margin' (6 px) reads no sign;
+    # 'auto' answered so looks once more at the 'padded' radius (9.2 px), and that second
+    # look stands only with a PSR of at least larger_size_retry_min_psr
+    crop = crop_of(kind, 18, 2, seed=1)
+    no_retry = dataclasses.replace(SMALL, crop_framed_retry=False)
+    classifier = Classifier(no_retry)
+    assert auto_framings(crop.shape, SMALL.min_sign_radius_px) == ('margin', 'tight')
+    margin = classifier.crop_evidence(crop, 'margin')
+    assert classifier.decide(crop, margin, crop=True).label == 'no_sign'
     padded = classifier.classify_crop(crop, 'padded')
     assert padded.label == kind
-    assert padded.psr < SMALL.larger_size_retry_min_psr
-    assert classifier.classify_crop(crop, 'auto').label == 'no_sign'
-    looser = Classifier(dataclasses.replace(SMALL, larger_size_retry_min_psr=padded.psr))
-    assert looser.classify_crop(crop, 'auto').label == kind
+    assert padded.psr >= SMALL.larger_size_retry_min_psr
+    assert classifier.decide_crop(crop, margin, 'auto') == padded
+    stricter = Classifier(dataclasses.replace(no_retry,
+                                              larger_size_retry_min_psr=padded.psr + 0.1))
+    assert stricter.decide_crop(crop, margin, 'auto').label == 'no_sign'
 
 
 @pytest.mark.parametrize('kind', ['30', '80', '120'])

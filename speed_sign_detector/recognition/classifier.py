@@ -243,8 +243,9 @@ class Classifier:
                       detection_psr_threshold: float | None = None
                       ) -> CorrelationEvidence | Classification:
         """:meth:`evidence_at` for a crop framed as :meth:`classify_crop` takes it; for
-        ``'auto'`` framing the ``'margin'`` and ``'tight'`` framings are tried and the one
-        whose best classification filter matches more clearly (higher PSR) wins. (The
+        ``'auto'`` framing the ``'margin'`` and ``'tight'`` framings are tried (``'padded'``
+        and ``'tight'`` in a crop under 20 px, :func:`.crop_framing.auto_framings`) and the
+        one whose best classification filter matches more clearly (higher PSR) wins. (The
         detection filters' PSR is a worse judge: a filter larger than the sign of a margin
         crop often finds its ring more clearly, and the classification at that size
         suffers.) The detection gate is ``detection_psr_threshold`` (default
@@ -253,7 +254,8 @@ class Classifier:
         gate = self.crop_detection_gate if detection_psr_threshold is None \
             else detection_psr_threshold
         return clearest(self.evidence_for_candidates(
-            crop, crop_positions(crop.shape, framing or self.config.crop_framing), gate))
+            crop, crop_positions(crop.shape, framing or self.config.crop_framing,
+                                 self.config.min_sign_radius_px), gate))
 
     @property
     def crop_detection_gate(self) -> float:

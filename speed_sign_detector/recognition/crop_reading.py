@@ -7,7 +7,9 @@ to take a size up to ``size_search_ratio`` away. Where that answers "no sign", t
 looks follow, and an answer of either stands only where it names a sign with a PSR of at
 least ``larger_size_retry_min_psr`` (a second look needs clearer evidence):
 
-1. with ``'auto'`` framing, a small crop is correlated again at its ``'padded'`` radius;
+1. with ``'auto'`` framing, a small crop is correlated again at its ``'padded'`` radius
+   (unless ``'auto'`` looked there first: a crop under 20 px,
+   :func:`~.crop_framing.auto_framings`);
 2. the **framed retry** (``crop_framed_retry``): the crop is correlated again with the
    detection filters held to the framing's centre and size (sizes within
    ``crop_retry_size_search_ratio`` of its radius, the centre within
@@ -46,7 +48,7 @@ from speed_sign_detector.config import ClassifierConfig
 from speed_sign_detector.recognition.candidate_evidence import CorrelationEvidence
 from speed_sign_detector.recognition.classification import LABEL_NO_SIGN, Classification
 from speed_sign_detector.recognition.crop_framing import (
-    AUTO_FRAMINGS,
+    auto_framings,
     crop_sign_radius,
     padded_fallback_radius,
 )
@@ -57,12 +59,14 @@ if TYPE_CHECKING:
 __all__ = ['clearest', 'crop_positions', 'decide_crop', 'framed_search_config']
 
 
-def crop_positions(shape: tuple[int, ...], framing: str) -> list[tuple[float, float, float]]:
+def crop_positions(shape: tuple[int, ...], framing: str, min_radius_px: float
+                   ) -> list[tuple[float, float, float]]:
     """The (x, y, radius) positions, crop pixels, at which a crop of ``shape`` (h, w) is
-    correlated: its centre, at the sign radius of ``framing`` (of ``'margin'`` and
-    ``'tight'`` for ``'auto'``)."""
+    correlated: its centre, at the sign radius of ``framing`` (of each of
+    :func:`~.crop_framing.auto_framings` for ``'auto'``, with ``min_radius_px`` the least
+    sign radius read)."""
     height, width = shape[:2]
-    framings = AUTO_FRAMINGS if framing == 'auto' else (framing,)
+    framings = auto_framings(shape, min_radius_px) if framing == 'auto' else (framing,)
     return [(width / 2.0, height / 2.0, crop_sign_radius(shape, name)) for name in framings]
 
 
@@ -99,7 +103,9 @@ def decide_crop(classifier: Classifier, crop: np.ndarray,
         return answer
     height, width = crop.shape
     gate = classifier.crop_detection_gate
-    radius = padded_fallback_radius(crop.shape) if framing == 'auto' else None
+    min_radius_px = classifier.config.min_sign_radius_px
+    radius = padded_fallback_radius(crop.shape) if framing == 'auto' and 'padded' not in \
+        auto_framings(crop.shape, min_radius_px) else None
     if radius is not None:
         (padded,) = classifier.evidence_for_candidates(
             crop, [(width / 2.0, height / 2.0, radius)], gate)
@@ -108,7 +114,8 @@ def decide_crop(classifier: Classifier, crop: np.ndarray,
             return second
     if classifier.config.crop_framed_retry:
         held = clearest(classifier.evidence_for_candidates(
-            crop, crop_positions(crop.shape, framing), gate, held_to_framing=True))
+            crop, crop_positions(crop.shape, framing, min_radius_px), gate,
+            held_to_framing=True))
         second = _read(classifier, crop, held, use_second_opinion)
         if classifier.second_look_stands(second):
             return second
