@@ -44,7 +44,8 @@ def test_executables_land_where_ros2_run_looks(colcon_install: Path) -> None:
 
 def test_ament_index_marker_config_and_launch_are_installed(colcon_install: Path) -> None:
     share = colcon_install / 'speed_sign_detector' / 'share'
-    assert (share / 'ament_index' / 'resource_index' / 'packages' / 'speed_sign_detector').is_file()
+    index = share / 'ament_index' / 'resource_index' / 'packages'
+    assert (index / 'speed_sign_detector').is_file()
     package_share = share / 'speed_sign_detector'
     assert (package_share / 'package.xml').is_file()
     assert (package_share / 'config' / 'speed_sign_detector.yaml').is_file()
@@ -58,7 +59,8 @@ def test_installed_executable_runs(colcon_install: Path) -> None:
     environment = dict(os.environ, PYTHONPATH=os.pathsep.join(
         [str(site_packages), os.environ.get('PYTHONPATH', '')]))
     completed = subprocess.run(
-        [sys.executable, str(prefix / 'lib' / 'speed_sign_detector' / 'speed_sign_eval'), '--help'],
+        [sys.executable, str(prefix / 'lib' / 'speed_sign_detector' / 'speed_sign_eval'),
+         '--help'],
         capture_output=True, text=True, env=environment, timeout=120, check=False)
     assert completed.returncode == 0, completed.stderr
     assert 'scenes' in completed.stdout

@@ -589,8 +589,9 @@ def resolve_vote_method(vote_method: str) -> str:
     ``'auto'`` is scatter on every renderer measured so far: on llvmpipe, whose triangle
     setup runs on one thread, and on an NVIDIA H100 (2026-11-24, bench/RESULTS.md), where
     in two runs the detector took 2.1-2.6 ms against raster's 5.0-5.2 ms at 640x480 and
-    8.2-12.5 against 34.4-39.4 ms at 1920x1080, with the same votes and recall. (It used to depend on the renderer; should a
-    renderer be measured to favour raster, the choice would take the renderer again.)
+    8.2-12.5 against 34.4-39.4 ms at 1920x1080, with the same votes and recall. (It used
+    to depend on the renderer; should a renderer be measured to favour raster, the choice
+    would take the renderer again.)
     """
     if vote_method in VOTE_METHODS:
         return vote_method

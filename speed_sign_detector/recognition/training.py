@@ -377,8 +377,8 @@ def locate_rendered(classifier: Classifier, config: TrainingConfig) -> LocatedCr
         return None
     images, labels = rendered_training_crops(config.rendered_per_kind,
                                              np.random.default_rng(config.seed + 1))
-    return locate_signs(classifier, [_RenderedCrop(label) for label in labels],  # type: ignore[misc]
-                        images)
+    crops = [_RenderedCrop(label) for label in labels]
+    return locate_signs(classifier, crops, images)  # type: ignore[arg-type]
 
 
 def _scene_examples(folders: Sequence[Path], classifier: Classifier,
