@@ -30,23 +30,29 @@ LOOKALIKE_CROPS = [(9, 'no_overtaking'), (17, 'no_entry'), (32, 'end_of_restrict
                    (16, '50')]
 
 
-def _write_crops(folder: Path, lookalikes: bool = False) -> list[int]:
-    """GTSRB-like crops of rendered signs (5 px margin); returns the class ids."""
+def _write_crops(folder: Path, lookalikes: bool = False, sign_px: int = 30,
+                 margin_px: int = 5) -> list[int]:
+    """GTSRB-like crops of rendered signs (a 30 px sign, 5 px margin by default); returns
+    the class ids."""
     classes = LIMIT_CROPS + (LOOKALIKE_CROPS if lookalikes else [])
     lines = ['Filename;Width;Height;Roi.X1;Roi.Y1;Roi.X2;Roi.Y2;ClassId']
     rng = np.random.default_rng(3)
+    side = sign_px + 2 * margin_px
+    box = f'{side};{side};{margin_px};{margin_px};{margin_px + sign_px - 1};' \
+        f'{margin_px + sign_px - 1}'
     for class_id, kind in classes:
-        bgr, alpha = render_sign(kind, 30)
+        bgr, alpha = render_sign(kind, sign_px)
         background = rng.uniform(60, 180)
         sign = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype(np.float32)
-        crop = np.full((40, 40), background, np.float32)
-        crop[5:35, 5:35] = sign + (1.0 - alpha) * background
+        crop = np.full((side, side), background, np.float32)
+        crop[margin_px:margin_px + sign_px, margin_px:margin_px + sign_px] = \
+            sign + (1.0 - alpha) * background
         crop = cv2.GaussianBlur(crop, (0, 0), 0.6)
         name = f'{class_id:05d}/00000_00000.png'
         (folder / name).parent.mkdir(parents=True, exist_ok=True)
         cv2.imwrite(str(folder / name), np.clip(crop, 0, 255).astype(np.uint8))
-        lines.append(f'{name};40;40;5;5;34;34;{class_id}')
-    lines.append('00012/00000_00000.png;40;40;5;5;34;34;12')  # other class: skipped
+        lines.append(f'{name};{box};{class_id}')
+    lines.append(f'00012/00000_00000.png;{box};12')  # other class: skipped
     (folder / 'labels.csv').write_text('\n'.join(lines) + '\n')
     return [c for c, _ in classes]
 
@@ -71,6 +77,33 @@ def test_json_report_on_synthetic_crops(tmp_path: Path,
     assert report['accuracy_by_size_px'] == {'30-40': 1.0}  # ROI 30 px wide
     assert report['ms_per_crop'] > 0 and report['bank_mb'] > 0
     assert report['lookalike_crops'] == 0 and report['read_as_limit_rate'] is None
+    assert report['framing'] == 'auto'
+
+
+def test_framing_option_overrides_the_config(tmp_path: Path,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    # 13 px signs with 2 px around them (17 px crops, padded in proportion): read as
+    # GTSRB-framed ('margin', 5 px margins) they would have a 3.5 px radius, too small to
+    # read; 'padded' and 'auto' read them
+    data = tmp_path / 'crops'
+    data.mkdir()
+    _write_crops(data, sign_px=13, margin_px=2)
+    config = tmp_path / 'params.yaml'
+    config.write_text(CONFIG_YAML.format(cache=tmp_path / 'cache'))
+    reports = {}
+    for framing in ('margin', 'padded', None):
+        assert eval_main(['crops', str(data), '--json', '--config', str(config), '-q']
+                         + (['--framing', framing] if framing else [])) == 0
+        reports[framing] = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+        assert reports[framing]['framing'] == (framing or 'auto')
+    # only the end of 80, right with any answer that is not a limit
+    assert reports['margin']['accuracy'] == pytest.approx(1 / len(LIMIT_CROPS))
+    assert reports['padded']['accuracy'] >= 5 / len(LIMIT_CROPS)
+    assert reports[None]['accuracy'] == reports['padded']['accuracy']
+    assert reports['padded']['wrong_limit_rate'] == 0.0
+    with pytest.raises(SystemExit):
+        eval_main(['crops', str(data), '--framing', 'loose'])
+    assert 'invalid choice' in capsys.readouterr().err
 
 
 def test_lookalikes_are_counted_as_signs_that_set_no_limit(

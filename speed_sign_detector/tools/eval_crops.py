@@ -3,8 +3,9 @@
 ``DIR/labels.csv`` (``;``-separated, header
 ``Filename;Width;Height;Roi.X1;Roi.Y1;Roi.X2;Roi.Y2;ClassId``) lists the crops, with
 GTSRB class ids. Each crop is read as grayscale and given to
-:meth:`Classifier.classify_crop`, framed as ``classifier.crop_framing`` says (``auto``:
-a GTSRB margin or a tight box, either). Two groups of classes are evaluated:
+:meth:`Classifier.classify_crop`, framed as ``--framing`` or else
+``classifier.crop_framing`` says (``auto``: a GTSRB margin, a tight box or, in a crop
+under 20 px, a margin in proportion). Two groups of classes are evaluated:
 
 - the limit classes 0=20, 1=30, 2=50, 3=60, 4=70, 5=80, 7=100, 8=120 km/h, and 6 = end
   of 80: an answer is right when it is the true limit, or, for class 6, any answer that
@@ -27,7 +28,8 @@ JSON (``--json``, the last stdout line) keys: ``crops`` (limit-class crops evalu
 ``mean_psr_right``, ``mean_psr_wrong``; ``lookalike_crops``, ``read_as_limit_rate``,
 ``per_lookalike_read_as_limit``, ``per_lookalike_count``, ``lookalike_confusion``;
 ``skipped``, ``unreadable`` (list of ``{file, reason}``), ``crops_planned``,
-``crops_done``, ``partial``; ``ms_per_crop``, ``bank_build_s``, ``bank_mb``. Rates
+``crops_done``, ``partial``; ``ms_per_crop``, ``bank_build_s``, ``bank_mb``;
+``framing`` (``--framing``, else ``classifier.crop_framing``). Rates
 over an empty group are null.
 """
 from __future__ import annotations
@@ -38,7 +40,7 @@ import logging
 import sys
 import time
 from collections import Counter, defaultdict
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -47,6 +49,7 @@ import numpy as np
 from speed_sign_detector.config import ClassifierConfig, load_yaml
 from speed_sign_detector.errors import TrainingDataError, TruthFileError
 from speed_sign_detector.recognition.classifier import Classification, Classifier
+from speed_sign_detector.recognition.crop_framing import CROP_FRAMINGS
 from speed_sign_detector.recognition.labelled_crops import (
     GTSRB_END_OF_80,
     GTSRB_LIMITS_KMH,
@@ -283,6 +286,7 @@ def evaluate(folder: Path, classifier: Classifier, limit: int = 0, every: int = 
                              len(outcomes)),
         'bank_build_s': classifier.build_time_s,
         'bank_mb': classifier.bank_nbytes / 1e6,
+        'framing': classifier.config.crop_framing,
     })
     return metrics
 
@@ -337,6 +341,8 @@ def run(args: argparse.Namespace) -> int:
         raise TruthFileError(f'{folder} is not a folder (expected one holding labels.csv)')
     read_labels(folder, include_lookalikes=True)   # a bad labels.csv fails before the banks
     config = load_yaml(args.config).classifier if args.config else ClassifierConfig()
+    if args.framing is not None:
+        config = replace(config, crop_framing=args.framing)
     classifier = Classifier(config)
     _LOG.info('filter banks: %d sizes, %.1f MB, built in %.2f s', len(classifier.banks),
               classifier.bank_nbytes / 1e6, classifier.build_time_s)
@@ -363,12 +369,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         f'{LABELS_HEADER}). Limit classes 0-8: accuracy and wrong-limit rate, overall and '
         'per class. Round look-alikes (classes 9, 10, 15, 16, 17, 32-42): the share read '
         'as a speed limit. Crops may frame the sign with a margin (as GTSRB does) or '
-        'tightly (the box is the sign): classifier.crop_framing (auto by default) says '
-        'which. Unreadable crop files are skipped, listed, and make the exit '
+        'tightly (the box is the sign): --framing or classifier.crop_framing (auto by '
+        'default) says which. Unreadable crop files are skipped, listed, and make the exit '
         'status 1; Ctrl-C reports the crops done, marked partial (exit status 130).')
     parser.add_argument('folder', metavar='DIR', help='folder holding labels.csv and the crops')
     parser.add_argument('--config', help='ROS 2 parameter YAML file of the node (its '
                         'classifier section is used)')
+    parser.add_argument('--framing', choices=CROP_FRAMINGS, default=None,
+                        help='how the crops frame their sign (overrides '
+                        'classifier.crop_framing; default: the config\'s, auto): margin '
+                        '(GTSRB: 10%% of the sign, at least 5 px), tight (the box is the '
+                        'sign), padded (10%%, no least margin), auto (any)')
     parser.add_argument('--json', action='store_true', help='print one JSON object as the '
                         'last line on stdout (instead of the summary)')
     parser.add_argument('--limit', type=int, default=0,
