@@ -23,7 +23,10 @@ from speed_sign_detector.config import PipelineConfig
 from speed_sign_detector.detection.candidates import Candidate
 from speed_sign_detector.detection.detector import Detector
 from speed_sign_detector.recognition.classifier import Classification, Classifier
-from speed_sign_detector.recognition.classifier_process import ClassifierProcess
+from speed_sign_detector.recognition.classifier_process import (
+    ClassifierProcess,
+    start_classifier_processes,
+)
 from speed_sign_detector.tracking import Tracker, TrackState
 
 LOGGER = logging.getLogger(__name__)
@@ -82,12 +85,30 @@ class DetectedFrame:
     detect_ms: float
 
 
+@dataclass(frozen=True)
+class ClassifiedFrame:
+    """A frame after classification, waiting for tracking.
+
+    Attributes:
+        frame: the detected frame.
+        classifications: what the classifier said of each candidate, in order (None
+            each when classification is off).
+        classify_ms: time the classification took, milliseconds.
+    """
+
+    frame: DetectedFrame
+    classifications: tuple[Classification | None, ...]
+    classify_ms: float
+
+
 class Pipeline:
     """Detector, classifier and tracker behind one ``process`` call.
 
     The detector may hold an OpenGL context: create, close and :meth:`detect` on one
     thread. :meth:`recognize` may run on another thread (one at a time, frames in
-    order), which is what :class:`OverlappedPipeline` does.
+    order), which is what :class:`OverlappedPipeline` does; its two steps too, with
+    several classifier workers: :meth:`classify` of different workers at the same time,
+    :meth:`track` one frame at a time in order.
 
     Example:
         >>> import numpy as np
@@ -101,9 +122,10 @@ class Pipeline:
         self.config = config or PipelineConfig()
         self._detector: Detector | None = Detector(self.config.detector,
                                                    backend=self.config.backend)
-        self._classifier = _build_classifier(self.config)
+        self._classifiers = _build_classifiers(self.config)
         self._tracker = Tracker(self.config.tracker)
-        advice = blas_thread_advice() if isinstance(self._classifier, Classifier) else None
+        in_process = any(isinstance(item, Classifier) for item in self._classifiers)
+        advice = blas_thread_advice() if in_process else None
         if advice is not None:
             LOGGER.warning(advice)
         LOGGER.info('pipeline ready: backend %s (%s), %s voting%s', self.backend_name,
@@ -125,6 +147,12 @@ class Pipeline:
     def vote_method(self) -> str:
         """How votes are added: ``'raster'`` or ``'scatter'`` (GL), ``'numpy'``."""
         return self._live_detector().vote_method
+
+    @property
+    def classifier_workers(self) -> int:
+        """How many frames :meth:`classify` can work on at the same time (one per
+        ``worker`` index), at least 1."""
+        return max(1, len(self._classifiers))
 
     @property
     def fallback_reason(self) -> str | None:
@@ -161,15 +189,37 @@ class Pipeline:
 
         Frames must come in the order they were detected (the tracker integrates them).
         """
+        return self.track(self.classify(frame))
+
+    def classify(self, frame: DetectedFrame, worker: int = 0) -> ClassifiedFrame:
+        """Classification alone, the first step of :meth:`recognize`.
+
+        Args:
+            frame: a detected frame.
+            worker: which classifier reads it, in ``[0, classifier_workers)``: calls with
+                different workers may run at the same time on different threads (each
+                worker one frame at a time), in any order.
+
+        Raises:
+            IndexError: for a worker outside that range.
+        """
+        if not 0 <= worker < self.classifier_workers:
+            raise IndexError(f'worker {worker} is outside [0, {self.classifier_workers})')
         started = time.perf_counter()
         candidates = frame.candidates
-        if self._classifier is not None and candidates:
-            classifications: tuple[Classification | None, ...] = self._classifier.classify(
-                frame.gray, candidates)
+        if self._classifiers and candidates:
+            classifications: tuple[Classification | None, ...] = \
+                self._classifiers[worker].classify(frame.gray, candidates)
         else:
             classifications = (None,) * len(candidates)
-        classified = time.perf_counter()
-        pairs = list(zip(candidates, classifications))
+        return ClassifiedFrame(frame, classifications, (time.perf_counter() - started) * 1e3)
+
+    def track(self, classified: ClassifiedFrame) -> FrameResult:
+        """Tracking, the second step of :meth:`recognize`: frames in the order they were
+        detected, one at a time."""
+        frame = classified.frame
+        started = time.perf_counter()
+        pairs = list(zip(frame.candidates, classified.classifications))
         update = self._tracker.update(frame.stamp_s, pairs)
         tracked = time.perf_counter()
         return FrameResult(
@@ -182,9 +232,10 @@ class Pipeline:
             active_limit_kmh=update.active_limit_kmh,
             recognized_limit_kmh=update.recognized_limit_kmh,
             timings_ms={'detect': frame.detect_ms,
-                        'classify': (classified - started) * 1e3,
-                        'track': (tracked - classified) * 1e3,
-                        'total': frame.detect_ms + (tracked - started) * 1e3},
+                        'classify': classified.classify_ms,
+                        'track': (tracked - started) * 1e3,
+                        'total': frame.detect_ms + classified.classify_ms
+                        + (tracked - started) * 1e3},
             tracks_reset=update.tracks_reset)
 
     def reconfigure(self, config: PipelineConfig) -> None:
@@ -197,11 +248,12 @@ class Pipeline:
             self._live_detector().close()
             self._detector = detector
         if config.classify != self.config.classify \
-                or config.classifier_process != self.config.classifier_process or (
+                or config.classifier_process != self.config.classifier_process \
+                or config.classifier_workers != self.config.classifier_workers or (
                 config.classify and config.classifier != self.config.classifier):
-            classifier = _build_classifier(config)
-            _close_classifier(self._classifier)
-            self._classifier = classifier
+            classifiers = _build_classifiers(config)
+            _close_classifiers(self._classifiers)
+            self._classifiers = classifiers
         if config.tracker != self.config.tracker:
             self._tracker.config = config.tracker
         self.config = config
@@ -216,8 +268,8 @@ class Pipeline:
         if self._detector is not None:
             self._detector.close()
             self._detector = None
-        _close_classifier(self._classifier)
-        self._classifier = None
+        _close_classifiers(self._classifiers)
+        self._classifiers = ()
 
     def _live_detector(self) -> Detector:
         if self._detector is None:
@@ -232,19 +284,22 @@ class Pipeline:
         self.close()
 
 
-def _build_classifier(config: PipelineConfig) -> Classifier | ClassifierProcess | None:
-    """The classifier ``config`` asks for: none, in this process, or in its own."""
+def _build_classifiers(config: PipelineConfig
+                       ) -> tuple[Classifier, ...] | tuple[ClassifierProcess, ...]:
+    """The classifiers ``config`` asks for: none, one in this process, or
+    ``classifier_workers`` in worker processes of their own."""
     if not config.classify:
-        return None
+        return ()
     if config.classifier_process:
-        return ClassifierProcess(config.classifier)
-    return Classifier(config.classifier)
+        return start_classifier_processes(config.classifier, config.classifier_workers)
+    return (Classifier(config.classifier),)
 
 
-def _close_classifier(classifier: Classifier | ClassifierProcess | None) -> None:
-    """Stop a classifier's worker process, where it has one."""
-    if isinstance(classifier, ClassifierProcess):
-        classifier.close()
+def _close_classifiers(classifiers: tuple[Classifier | ClassifierProcess, ...]) -> None:
+    """Stop the classifiers' worker processes, where they have them."""
+    for classifier in classifiers:
+        if isinstance(classifier, ClassifierProcess):
+            classifier.close()
 
 
 ResultCallback = Callable[[FrameResult, Any], None]
@@ -254,7 +309,8 @@ ErrorCallback = Callable[[Exception, Any], None]
 
 
 class OverlappedPipeline:
-    """Detection of frame N+1 overlapping the recognition of frame N, on two threads.
+    """Detection of frame N+1 overlapping the recognition of frame N, on two threads (or
+    more, with several classifier workers).
 
     :meth:`submit` detects on the calling thread (the one that owns the pipeline and
     its GL context), then hands the frame to a helper thread, which recognizes and
@@ -264,7 +320,14 @@ class OverlappedPipeline:
     detector releases the GIL while the driver works). A result comes one recognition
     later than with :meth:`Pipeline.process`.
 
-    At most one detected frame waits for the helper: :meth:`submit` first waits until
+    With ``classifier_workers`` N above 1 (worker processes, see
+    :class:`~speed_sign_detector.config.PipelineConfig`) there are N helpers, helper i
+    classifying with worker i: up to N frames are classified at the same time, and each
+    is tracked and reported in its turn, so results still come in the order submitted
+    and the tracker sees the frames in that order. The helpers follow the pipeline's
+    worker count as :meth:`Pipeline.reconfigure` changes it (at the next :meth:`submit`).
+
+    At most one detected frame waits for a helper: :meth:`submit` first waits until
     the previous one has been taken, so a caller that keeps only the newest frame (the
     node) never detects a frame that would then wait. With ``overlap=False``
     :meth:`submit` runs :meth:`Pipeline.process` and calls ``on_result`` itself.
@@ -286,23 +349,24 @@ class OverlappedPipeline:
         self._on_result = on_result
         self._on_error = on_error
         self._condition = threading.Condition()
-        self._waiting: tuple[DetectedFrame, Any] | None = None
-        self._busy = False
+        # the frame waiting for a helper: (sequence number, frame, context)
+        self._waiting: tuple[int, DetectedFrame, Any] | None = None
+        self._submitted = 0  # sequence numbers handed out
+        self._next_to_report = 0  # the sequence number whose result goes out next
+        self._in_flight = 0  # frames taken by helpers and not yet reported
         self._closed = False
-        self._helper: threading.Thread | None = None
+        self._helpers: dict[int, threading.Thread] = {}  # by classifier worker
         if overlap:
-            self._helper = threading.Thread(target=self._run_helper, name='recognition',
-                                            daemon=True)
-            self._helper.start()
+            self._start_helpers()
 
     def wait_until_ready(self) -> None:
-        """Block until :meth:`submit` can detect at once (no frame waits for the helper)."""
+        """Block until :meth:`submit` can detect at once (no frame waits for a helper)."""
         with self._condition:
             while self._waiting is not None and not self._closed:
                 self._condition.wait()
 
     def submit(self, gray: np.ndarray, stamp_s: float, context: Any = None) -> None:
-        """Detect a frame here, then recognize it on the helper (see the class).
+        """Detect a frame here, then recognize it on a helper (see the class).
 
         Errors of the detection (and, with ``overlap=False``, of the recognition and of
         ``on_result``) propagate from here; with overlap, the recognition's go to
@@ -317,29 +381,31 @@ class OverlappedPipeline:
         if not self.overlap:
             self._on_result(self.pipeline.process(gray, stamp_s), context)
             return
+        self._start_helpers()
         self.wait_until_ready()
         detected = self.pipeline.detect(gray, stamp_s)
         with self._condition:
             if self._closed:
                 raise RuntimeError('this OverlappedPipeline was closed')
-            self._waiting = (detected, context)
+            self._waiting = (self._submitted, detected, context)
+            self._submitted += 1
             self._condition.notify_all()
 
     def drain(self) -> None:
         """Block until every submitted frame has been recognized and reported."""
         with self._condition:
-            while (self._waiting is not None or self._busy) and self._helper is not None \
-                    and self._helper.is_alive():
+            while (self._waiting is not None or self._in_flight) and any(
+                    helper.is_alive() for helper in self._helpers.values()):
                 self._condition.wait()
 
     def close(self) -> None:
-        """Finish the submitted frames and stop the helper (idempotent)."""
+        """Finish the submitted frames and stop the helpers (idempotent)."""
         self.drain()
         with self._condition:
             self._closed = True
             self._condition.notify_all()
-        if self._helper is not None:
-            self._helper.join()
+        for helper in self._helpers.values():
+            helper.join()
 
     def __enter__(self) -> Self:
         return self
@@ -348,26 +414,57 @@ class OverlappedPipeline:
                  traceback: TracebackType | None) -> None:
         self.close()
 
-    def _run_helper(self) -> None:
+    def _start_helpers(self) -> None:
+        """A helper for each classifier worker of the pipeline that has none running
+        (helpers beyond the workers' count stop by themselves)."""
+        for worker in range(self.pipeline.classifier_workers):
+            helper = self._helpers.get(worker)
+            if helper is None or not helper.is_alive():
+                helper = threading.Thread(
+                    target=self._run_helper, args=(worker,), daemon=True,
+                    name='recognition' if worker == 0 else f'recognition-{worker}')
+                self._helpers[worker] = helper
+                helper.start()
+
+    def _run_helper(self, worker: int) -> None:
         while True:
             with self._condition:
-                while self._waiting is None and not self._closed:
+                while self._waiting is None and not self._closed \
+                        and worker < self.pipeline.classifier_workers:
                     self._condition.wait()
-                if self._waiting is None:
+                if self._waiting is None or worker >= self.pipeline.classifier_workers:
                     return
-                (detected, context), self._waiting = self._waiting, None
-                self._busy = True
+                (sequence, detected, context), self._waiting = self._waiting, None
+                self._in_flight += 1
                 self._condition.notify_all()
+            classified: ClassifiedFrame | Exception
             try:
-                try:
-                    result = self.pipeline.recognize(detected)
-                except Exception as err:  # noqa: BLE001 - one bad frame must not stop it
-                    self._on_error(err, context)
-                else:
-                    self._on_result(result, context)
-            except Exception:  # noqa: BLE001 - a failing callback must not stop it either
-                LOGGER.exception('result callback failed')
+                classified = self.pipeline.classify(detected, worker)
+            except Exception as err:  # noqa: BLE001 - reported in its turn, on_error
+                classified = err
+            with self._condition:
+                while self._next_to_report != sequence:
+                    self._condition.wait()
+            try:
+                self._report(classified, context)
             finally:
                 with self._condition:
-                    self._busy = False
+                    self._next_to_report += 1
+                    self._in_flight -= 1
                     self._condition.notify_all()
+
+    def _report(self, classified: ClassifiedFrame | Exception, context: Any) -> None:
+        """Track a classified frame and call ``on_result``, or ``on_error`` with what
+        its classification or tracking raised (in the frame's turn)."""
+        try:
+            if isinstance(classified, Exception):
+                self._on_error(classified, context)
+                return
+            try:
+                result = self.pipeline.track(classified)
+            except Exception as err:  # noqa: BLE001 - one bad frame must not stop it
+                self._on_error(err, context)
+            else:
+                self._on_result(result, context)
+        except Exception:  # noqa: BLE001 - a failing callback must not stop it either
+            LOGGER.exception('result callback failed')

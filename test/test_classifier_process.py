@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from process_helpers import CLASSIFIER_WORKER, child_processes
 
-from speed_sign_detector.config import ClassifierConfig, PipelineConfig
+from speed_sign_detector.config import ClassifierConfig, ConfigError, PipelineConfig
 from speed_sign_detector.detection.candidates import Candidate
 from speed_sign_detector.errors import (
     BankFileError,
@@ -23,7 +23,10 @@ from speed_sign_detector.errors import (
 )
 from speed_sign_detector.pipeline import Pipeline
 from speed_sign_detector.recognition.classifier import Classifier
-from speed_sign_detector.recognition.classifier_process import ClassifierProcess
+from speed_sign_detector.recognition.classifier_process import (
+    ClassifierProcess,
+    start_classifier_processes,
+)
 from speed_sign_detector.recognition.templates import render_sign
 
 #: Banks up to radius 30 px only, to keep the module fast (the default goes to 48).
@@ -136,21 +139,70 @@ def test_pipeline_setting_starts_swaps_and_stops_workers(config: ClassifierConfi
     with Pipeline(dataclasses.replace(settings, classifier_process=False)) as reference:
         expected = reference.process(gray, 0.0)
     pipeline = Pipeline(settings)
-    worker = pipeline._classifier
+    [worker] = pipeline._classifiers
     assert isinstance(worker, ClassifierProcess)
     pid = worker.pid
     assert pid is not None
     result = pipeline.process(gray, 0.0)
     assert result.detections == expected.detections
     pipeline.reconfigure(dataclasses.replace(settings, classifier_process=False))
-    assert isinstance(pipeline._classifier, Classifier) and not _alive(pid)
+    [in_place] = pipeline._classifiers
+    assert isinstance(in_place, Classifier) and not _alive(pid)
     pipeline.reconfigure(settings)
-    worker = pipeline._classifier
+    [worker] = pipeline._classifiers
     assert isinstance(worker, ClassifierProcess)
     pid = worker.pid
     assert pid is not None and _alive(pid)
     pipeline.close()
     assert not _alive(pid)
+
+
+def test_several_workers_start_together_read_alike_and_follow_reconfigure(
+        config: ClassifierConfig) -> None:
+    """``classifier_workers`` 2: two worker processes, each giving the in-process
+    answers through ``Pipeline.classify``; back to 1, the second one stops."""
+    gray, _ = _frame()
+    settings = PipelineConfig(backend='numpy', classifier=config, classifier_process=True,
+                              classifier_workers=2)
+    with Pipeline(dataclasses.replace(settings, classifier_process=False,
+                                      classifier_workers=1)) as reference:
+        expected = reference.process(gray, 0.0)
+    with Pipeline(settings) as pipeline:
+        assert pipeline.classifier_workers == 2
+        pids = [worker.pid for worker in pipeline._classifiers]
+        assert None not in pids and len(set(pids)) == 2 and all(map(_alive, pids))
+        detected = pipeline.detect(gray, 0.0)
+        for worker in (0, 1):
+            classified = pipeline.classify(detected, worker)
+            assert classified.classifications == tuple(
+                detection.classification for detection in expected.detections)
+        with pytest.raises(IndexError, match='worker 2 is outside'):
+            pipeline.classify(detected, 2)
+        pipeline.reconfigure(dataclasses.replace(settings, classifier_workers=1))
+        assert pipeline.classifier_workers == 1
+        assert [worker.pid for worker in pipeline._classifiers] != pids
+        assert not any(map(_alive, pids))
+        pid = pipeline._classifiers[0].pid
+    assert pid is not None and not _alive(pid)
+
+
+def test_several_workers_need_worker_processes() -> None:
+    with pytest.raises(ConfigError, match='classifier_workers .2. above 1 needs '
+                                          'classifier_process'):
+        PipelineConfig(classifier_workers=2)
+    with pytest.raises(ConfigError, match='classifier_workers = 17 is above its maximum'):
+        PipelineConfig(classifier_process=True, classifier_workers=17)
+
+
+def test_a_worker_that_cannot_build_stops_the_others(tmp_path: Path) -> None:
+    """Two workers started together on a corrupt bank file: the error of the first is
+    raised, and neither worker is left running."""
+    broken = tmp_path / 'broken.npz'
+    broken.write_bytes(b'not a bank')
+    before = set(child_processes(CLASSIFIER_WORKER))
+    with pytest.raises(BankFileError):
+        start_classifier_processes(dataclasses.replace(SMALL_BANKS, bank_file=str(broken)), 2)
+    assert set(child_processes(CLASSIFIER_WORKER)) <= before
 
 
 def test_interrupt_of_the_process_group_leaves_the_worker_to_its_parent(

@@ -385,7 +385,9 @@ def test_backend_switch_rebuilds_the_detector_on_the_worker(ros: tuple) -> None:
 
 def test_classifier_process_reads_signs_in_a_worker_process(ros: tuple) -> None:
     """``classifier_process`` set at run time: the classifier moves to a worker process,
-    which reads the approach's limit; set back, it returns to the node's process."""
+    which reads the approach's limit; with ``classifier_workers`` 2, two workers read
+    the next approach (a change that would leave two workers without processes is
+    rejected with the reason); set back, the classifier returns to the node's process."""
     node, probe = ros
     assert not child_processes(CLASSIFIER_WORKER)
     [result] = call_set_parameters(probe, parameter('classifier_process', True))
@@ -395,8 +397,19 @@ def test_classifier_process_reads_signs_in_a_worker_process(ros: tuple) -> None:
         assert len(child_processes(CLASSIFIER_WORKER)) == 1
         assert any(point['limit_kmh'] == 70 for point in nearest)
         wait_for(lambda: probe.limits and probe.limits[-1] == 70, 'speed_limit 70')
+        [result] = call_set_parameters(probe, parameter('classifier_workers', 2))
+        assert result.successful, result.reason
+        nearest = run_approach(probe, '50', compressed=False, seed=5)
+        assert len(child_processes(CLASSIFIER_WORKER)) == 2
+        assert any(point['limit_kmh'] == 50 for point in nearest)
+        wait_for(lambda: probe.limits and probe.limits[-1] == 50, 'speed_limit 50')
+        [refused] = call_set_parameters(probe, parameter('classifier_process', False))
+        assert not refused.successful
+        assert 'classifier_workers (2) above 1 needs classifier_process' in refused.reason
     finally:
+        [fewer] = call_set_parameters(probe, parameter('classifier_workers', 1))
         [restored] = call_set_parameters(probe, parameter('classifier_process', False))
+    assert fewer.successful, fewer.reason
     assert restored.successful, restored.reason
     send_and_wait(probe, image_message(textured_background(10), Header(), image_class=Image),
                   probe.image_pub)  # the change applies between frames

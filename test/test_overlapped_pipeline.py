@@ -1,9 +1,12 @@
 """OverlappedPipeline: detection of frame N+1 on the calling thread while frame N is
-recognized on a helper thread gives the same results as Pipeline.process, in order."""
+recognized on a helper thread gives the same results as Pipeline.process, in order; with
+several classifier worker processes, frames classified at the same time are still
+tracked and reported in order."""
 from __future__ import annotations
 
 import dataclasses
 import threading
+import time
 from collections.abc import Iterable
 
 import cv2
@@ -14,6 +17,7 @@ from scene_helpers import approach_frames, textured_background
 from speed_sign_detector.config import PipelineConfig
 from speed_sign_detector.detection.detector import Detector
 from speed_sign_detector.pipeline import (
+    ClassifiedFrame,
     DetectedFrame,
     FrameResult,
     OverlappedPipeline,
@@ -79,14 +83,14 @@ def test_same_results_in_order_as_process(pipeline: Pipeline, approach: list[np.
 def test_recognition_errors_go_to_on_error_and_the_helper_keeps_going(
         pipeline: Pipeline, approach: list[np.ndarray], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    recognize = pipeline.recognize
+    classify = pipeline.classify
 
-    def failing_on_frame_3(frame: DetectedFrame) -> FrameResult:
+    def failing_on_frame_3(frame: DetectedFrame, worker: int = 0) -> ClassifiedFrame:
         if frame.stamp_s == 3.0:
             raise RuntimeError('classifier broke')
-        return recognize(frame)
+        return classify(frame, worker)
 
-    monkeypatch.setattr(pipeline, 'recognize', failing_on_frame_3)
+    monkeypatch.setattr(pipeline, 'classify', failing_on_frame_3)
     pipeline.reset()
     results: list[int] = []
     errors: list[tuple[str, int]] = []
@@ -177,3 +181,45 @@ def test_gl_detection_lets_other_threads_run(approach: list[np.ndarray]) -> None
             counter.join()
     # with the GIL held during a dispatch the counter could not take a single step then
     assert steps_inside > 0
+
+
+def test_several_classifier_workers_classify_at_once_and_report_in_order(
+        approach: list[np.ndarray]) -> None:
+    """Two worker processes: every classification waits at a barrier for another one to
+    run at the same time (it fails after 30 s otherwise), and the even frames take
+    longer, so the odd ones finish first; the results still come in submission order
+    and equal those of Pipeline.process, frame for frame."""
+    config = PipelineConfig(backend='gl', classifier_process=True, classifier_workers=2)
+    frames = approach[:12]
+    with Pipeline(dataclasses.replace(config, classifier_process=False,
+                                      classifier_workers=1)) as reference:
+        serial = [reference.process(gray, index * FRAME_PERIOD_S)
+                  for index, gray in enumerate(frames)]
+    with Pipeline(config) as pipeline:
+        classify = pipeline.classify
+        together = threading.Barrier(2, timeout=30.0)
+        workers_seen: set[tuple[str, int]] = set()
+
+        def classify_alongside_another(frame: DetectedFrame, worker: int = 0
+                                       ) -> ClassifiedFrame:
+            together.wait()
+            workers_seen.add((threading.current_thread().name, worker))
+            classified = classify(frame, worker)
+            if round(frame.stamp_s / FRAME_PERIOD_S) % 2 == 0:
+                time.sleep(0.05)
+            return classified
+
+        pipeline.classify = classify_alongside_another  # type: ignore[method-assign]
+        received: list[tuple[FrameResult, int]] = []
+
+        def on_error(error: Exception, context: int) -> None:
+            raise AssertionError(f'frame {context}: {error!r}')
+
+        with OverlappedPipeline(pipeline, lambda result, context: received.append(
+                (result, context)), on_error) as stages:
+            for index, gray in enumerate(frames):
+                stages.submit(gray, index * FRAME_PERIOD_S, context=index)
+    assert [context for _, context in received] == list(range(len(frames)))
+    assert [comparable(result) for result, _ in received] == [
+        comparable(result) for result in serial]
+    assert workers_seen == {('recognition', 0), ('recognition-1', 1)}

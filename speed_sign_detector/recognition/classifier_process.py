@@ -49,7 +49,7 @@ from speed_sign_detector.detection.candidates import Candidate
 from speed_sign_detector.errors import ClassifierProcessError
 from speed_sign_detector.recognition.classification import Classification
 
-__all__ = ['ClassifierProcess']
+__all__ = ['ClassifierProcess', 'start_classifier_processes']
 
 LOGGER = logging.getLogger(__name__)
 
@@ -106,6 +106,10 @@ class ClassifierProcess:
         config: the classifier's configuration (the worker builds it).
         answer_timeout_s: a worker that has not answered a frame after this many seconds
             is taken for hung: it is killed and the call raises (> 0).
+        wait: wait here until the worker has built its classifier; False returns once it
+            is started, and :meth:`wait_until_ready` (or the first ``classify``) waits,
+            so that several workers build their classifiers at the same time (see
+            :func:`start_classifier_processes`).
 
     Raises:
         ClassifierError: what building the classifier raised in the worker (for example
@@ -113,14 +117,18 @@ class ClassifierProcess:
         ClassifierProcessError: when the worker cannot be started or exits first.
     """
 
-    def __init__(self, config: ClassifierConfig, answer_timeout_s: float = 30.0) -> None:
+    def __init__(self, config: ClassifierConfig, answer_timeout_s: float = 30.0, *,
+                 wait: bool = True) -> None:
         if not answer_timeout_s > 0:
             raise ValueError(f'answer_timeout_s must be > 0, got {answer_timeout_s}')
         self.config = config
         self.answer_timeout_s = answer_timeout_s
         self._process: subprocess.Popen[bytes] | None = None
         self._connection: multiprocessing.connection.Connection | None = None
-        self._start()
+        self._ready = False
+        self._spawn()
+        if wait:
+            self.wait_until_ready()
 
     @property
     def pid(self) -> int | None:
@@ -138,13 +146,31 @@ class ClassifierProcess:
         """
         if self._connection is None:
             LOGGER.warning('starting a new classifier process (the previous one exited)')
-            self._start()
-        status, answer = self._exchange((gray, tuple(candidates)), self.answer_timeout_s,
-                                        'while classifying a frame; the next frame starts '
-                                        'a new one')
+            self._spawn()
+        self.wait_until_ready()
+        self._send((gray, tuple(candidates)))
+        status, answer = self._receive(self.answer_timeout_s, 'while classifying a frame; '
+                                       'the next frame starts a new one')
         if status == 'error':
             raise answer
         return answer
+
+    def wait_until_ready(self) -> None:
+        """Block until the worker has built its classifier (at once when it has).
+
+        Raises:
+            ClassifierError: what building the classifier raised in the worker (the
+                worker is stopped).
+            ClassifierProcessError: the worker exited, or was not ready within
+                ``START_TIMEOUT_S`` (it is killed).
+        """
+        if self._ready:
+            return
+        status, answer = self._receive(START_TIMEOUT_S, 'before it was ready')
+        if status == 'error':
+            self.close()
+            raise answer
+        self._ready = True
 
     def close(self) -> None:
         """Stop the worker: ask it to finish, terminate it when it does not in time."""
@@ -155,7 +181,9 @@ class ClassifierProcess:
                 pass
         self._reap()
 
-    def _start(self) -> None:
+    def _spawn(self) -> None:
+        """Start a worker and send it the configuration (it builds the classifier while
+        :meth:`wait_until_ready` waits for it)."""
         parent_end, child_end = socket.socketpair()
         try:
             # one BLAS thread unless the environment says otherwise (see blas_threads)
@@ -172,23 +200,35 @@ class ClassifierProcess:
         finally:
             child_end.close()
         connection = multiprocessing.connection.Connection(parent_end.detach())
-        self._process, self._connection = process, connection
-        status, answer = self._exchange(self.config, START_TIMEOUT_S, 'before it was ready')
-        if status == 'error':
-            self.close()
-            raise answer
+        self._process, self._connection, self._ready = process, connection, False
+        self._send(self.config)
 
-    def _exchange(self, message: object, timeout_s: float, when: str) -> tuple[str, Any]:
-        """Send ``message`` to the worker and return its ``(status, answer)``.
+    def _send(self, message: object) -> None:
+        """Send ``message`` to the worker.
+
+        Raises:
+            ClassifierProcessError: the worker exited.
+        """
+        connection = self._connection
+        assert connection is not None
+        try:
+            connection.send(message)
+        except OSError as err:
+            code = self._reap()
+            raise ClassifierProcessError(f'the classifier process exited (exit code {code}) '
+                                         'before it took a request') from err
+
+    def _receive(self, timeout_s: float, when: str) -> tuple[str, Any]:
+        """The worker's next ``(status, answer)``.
 
         Raises:
             ClassifierProcessError: the worker exited, or did not answer within
                 ``timeout_s`` (it is then killed); ``when`` ends the message.
         """
         connection = self._connection
-        assert connection is not None
+        if connection is None:
+            raise ClassifierProcessError(f'the classifier process had exited {when}')
         try:
-            connection.send(message)
             if not connection.poll(timeout_s):
                 self._kill()
                 raise ClassifierProcessError(f'the classifier process did not answer within '
@@ -223,7 +263,7 @@ class ClassifierProcess:
                     code = process.wait()
         if self._connection is not None:
             self._connection.close()
-        self._process, self._connection = None, None
+        self._process, self._connection, self._ready = None, None, False
         return code
 
     def __enter__(self) -> Self:
@@ -232,6 +272,32 @@ class ClassifierProcess:
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
                  traceback: TracebackType | None) -> None:
         self.close()
+
+
+def start_classifier_processes(config: ClassifierConfig, count: int,
+                               answer_timeout_s: float = 30.0
+                               ) -> tuple[ClassifierProcess, ...]:
+    """``count`` :class:`ClassifierProcess` workers that build their classifiers at the
+    same time (a start takes about as long as one worker's).
+
+    Raises:
+        ValueError: ``count`` below 1.
+        ClassifierError, ClassifierProcessError: as :class:`ClassifierProcess`; the
+            workers already started are stopped.
+    """
+    if count < 1:
+        raise ValueError(f'count must be >= 1, got {count}')
+    processes: list[ClassifierProcess] = []
+    try:
+        for _ in range(count):
+            processes.append(ClassifierProcess(config, answer_timeout_s, wait=False))
+        for process in processes:
+            process.wait_until_ready()
+    except BaseException:
+        for process in processes:
+            process.close()
+        raise
+    return tuple(processes)
 
 
 def main(argv: Sequence[str]) -> int:
