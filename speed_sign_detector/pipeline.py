@@ -155,6 +155,17 @@ class Pipeline:
         return max(1, len(self._classifiers))
 
     @property
+    def classifier_location(self) -> str:
+        """Where the classifier runs: ``'off'``, ``'in this process'`` or ``'N worker
+        process(es)'``."""
+        if not self._classifiers:
+            return 'off'
+        if isinstance(self._classifiers[0], ClassifierProcess):
+            count = len(self._classifiers)
+            return f'{count} worker process{"es" if count > 1 else ""}'
+        return 'in this process'
+
+    @property
     def fallback_reason(self) -> str | None:
         """Why the GL backend is not used although it was allowed, else None."""
         return self._live_detector().fallback_reason

@@ -169,6 +169,7 @@ def test_several_workers_start_together_read_alike_and_follow_reconfigure(
         expected = reference.process(gray, 0.0)
     with Pipeline(settings) as pipeline:
         assert pipeline.classifier_workers == 2
+        assert pipeline.classifier_location == '2 worker processes'
         pids = [worker.pid for worker in pipeline._classifiers]
         assert None not in pids and len(set(pids)) == 2 and all(map(_alive, pids))
         detected = pipeline.detect(gray, 0.0)
@@ -180,9 +181,17 @@ def test_several_workers_start_together_read_alike_and_follow_reconfigure(
             pipeline.classify(detected, 2)
         pipeline.reconfigure(dataclasses.replace(settings, classifier_workers=1))
         assert pipeline.classifier_workers == 1
+        assert pipeline.classifier_location == '1 worker process'
         assert [worker.pid for worker in pipeline._classifiers] != pids
         assert not any(map(_alive, pids))
         pid = pipeline._classifiers[0].pid
+        pipeline.reconfigure(dataclasses.replace(settings, classifier_process=False,
+                                                 classifier_workers=1))
+        assert pipeline.classifier_location == 'in this process'
+        pipeline.reconfigure(dataclasses.replace(settings, classify=False,
+                                                 classifier_process=False,
+                                                 classifier_workers=1))
+        assert (pipeline.classifier_location, pipeline.classifier_workers) == ('off', 1)
     assert pid is not None and not _alive(pid)
 
 

@@ -395,12 +395,14 @@ def test_classifier_process_reads_signs_in_a_worker_process(ros: tuple) -> None:
     try:
         nearest = run_approach(probe, '70', compressed=False, seed=4)
         assert len(child_processes(CLASSIFIER_WORKER)) == 1
+        latest_status(probe, lambda v: v['classifier'] == '1 worker process')
         assert any(point['limit_kmh'] == 70 for point in nearest)
         wait_for(lambda: probe.limits and probe.limits[-1] == 70, 'speed_limit 70')
         [result] = call_set_parameters(probe, parameter('classifier_workers', 2))
         assert result.successful, result.reason
         nearest = run_approach(probe, '50', compressed=False, seed=5)
         assert len(child_processes(CLASSIFIER_WORKER)) == 2
+        latest_status(probe, lambda v: v['classifier'] == '2 worker processes')
         assert any(point['limit_kmh'] == 50 for point in nearest)
         wait_for(lambda: probe.limits and probe.limits[-1] == 50, 'speed_limit 50')
         [refused] = call_set_parameters(probe, parameter('classifier_process', False))
@@ -414,6 +416,15 @@ def test_classifier_process_reads_signs_in_a_worker_process(ros: tuple) -> None:
     send_and_wait(probe, image_message(textured_background(10), Header(), image_class=Image),
                   probe.image_pub)  # the change applies between frames
     wait_for(lambda: not child_processes(CLASSIFIER_WORKER), 'the classifier worker to stop')
+
+    def newest_classifier_location() -> str | None:
+        with probe.lock:
+            arrays = list(probe.diagnostics)
+        return next((kv.value for array in reversed(arrays) for status in array.status
+                     for kv in status.values if kv.key == 'classifier'), None)
+
+    wait_for(lambda: newest_classifier_location() == 'in this process',
+             'the diagnostics to say the classifier is back in the node process')
 
 
 

@@ -131,6 +131,7 @@ class DetectorNodeBase:
         self._renderer = ''
         self._vote_method = ''
         self._fallback_reason: str | None = None
+        self._classifier_location = 'off'
         self._last_tick = (time.monotonic(), 0)
         self._published_limit_kmh: int | None = None
         self._worker_error: BaseException | None = None
@@ -413,6 +414,7 @@ class DetectorNodeBase:
                 'gl_renderer': self._renderer,
                 'vote_method': self._vote_method,
                 'gl_fallback_reason': self._fallback_reason or '',
+                'classifier': self._classifier_location,
                 'last_error': last_error,
             })
 
@@ -519,6 +521,7 @@ class DetectorNodeBase:
         self._backend, self._renderer = pipeline.backend_name, pipeline.renderer
         self._vote_method = pipeline.vote_method
         self._fallback_reason = pipeline.fallback_reason
+        self._classifier_location = pipeline.classifier_location
 
     def _process(self, stages: OverlappedPipeline, frame: ReceivedFrame) -> None:
         """Convert and detect one frame (a bad one is counted and logged); its recognition
