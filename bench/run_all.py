@@ -87,7 +87,8 @@ from speed_sign_detector.detection.detector import Detector  # noqa: E402
 from speed_sign_detector.detection.voting_gl import SOFTWARE_RENDERERS  # noqa: E402
 from speed_sign_detector.detection.voting_numpy import compute_edges  # noqa: E402
 from speed_sign_detector.errors import SpeedSignError  # noqa: E402
-from speed_sign_detector.pipeline import FrameResult, OverlappedPipeline, Pipeline  # noqa: E402
+from speed_sign_detector.overlapped_pipeline import OverlappedPipeline  # noqa: E402
+from speed_sign_detector.pipeline import FrameResult, Pipeline  # noqa: E402
 from speed_sign_detector.recognition.classifier import Classifier  # noqa: E402
 from speed_sign_detector.scene_truth import SceneSign, read_gtsdb_truth  # noqa: E402
 from speed_sign_detector.tools.eval_scenes import SIZE_BINS_PX  # noqa: E402

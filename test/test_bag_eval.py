@@ -110,6 +110,25 @@ def test_every_format_and_encoding_gives_the_reference_metrics(
         assert summary['final_limit_kmh'] == expected['final_limit_kmh']
 
 
+def test_several_classifier_workers_give_the_reference_metrics(
+        drive: dict[str, Any], reference: dict[str, Any], bank_config: Path,
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A parameter file of a many-core host (two classifier worker processes): the frames
+    are classified two at a time and still tracked in order, so the recognitions and
+    their times are those of one classifier."""
+    params = tmp_path / 'workers.yaml'
+    params.write_text(bank_config.read_text()
+                      + 'classifier_process: true\nclassifier_workers: 2\n')
+    status = eval_tool.main(['bag', str(drive['bags']['mcap_raw']), '--truth',
+                             str(drive['truth']), '--json', '--config', str(params)])
+    captured = capsys.readouterr()
+    assert status == 0, captured.err
+    summary, expected = last_json(captured.out), reference['summary']
+    for key in ('frames', 'signs', 'recognized', 'recall', 'wrong_limits', 'limit_events',
+                'final_limit_kmh', 'per_sign'):
+        assert summary[key] == expected[key], key
+
+
 def test_results_bag_holds_outputs_at_input_stamps(drive: dict[str, Any],
                                                    reference: dict[str, Any]) -> None:
     """Topics, types and stamps of the --out bag, read back with rosbags."""

@@ -16,11 +16,11 @@ from scene_helpers import approach_frames, textured_background
 
 from speed_sign_detector.config import PipelineConfig
 from speed_sign_detector.detection.detector import Detector
+from speed_sign_detector.overlapped_pipeline import OverlappedPipeline
 from speed_sign_detector.pipeline import (
     ClassifiedFrame,
     DetectedFrame,
     FrameResult,
-    OverlappedPipeline,
     Pipeline,
 )
 

@@ -16,8 +16,9 @@ Threads:
       newest frame and detects its candidates.
     * With ``overlap_stages`` (the default), a recognition thread classifies and tracks
       each detected frame while the worker detects the next one, and publishes the
-      results (:class:`~speed_sign_detector.pipeline.OverlappedPipeline`); without it
-      the worker does that too.
+      results (:class:`~speed_sign_detector.overlapped_pipeline.OverlappedPipeline`;
+      with ``classifier_workers`` N, N recognition threads classify and take turns to
+      track and publish, frames in order); without it the worker does that too.
 
 Worker threads are stopped (:meth:`DetectorNodeBase.stop_pipeline`) before the node is
 destroyed and before the ROS context shuts down, so no thread publishes through a dead
@@ -58,7 +59,8 @@ from speed_sign_detector.config import (
 from speed_sign_detector.detection.detector import cpu_detector_advice
 from speed_sign_detector.errors import ConfigError, ImageConversionError, SpeedSignError
 from speed_sign_detector.image_conversion import message_to_gray
-from speed_sign_detector.pipeline import FrameResult, OverlappedPipeline, Pipeline
+from speed_sign_detector.overlapped_pipeline import OverlappedPipeline
+from speed_sign_detector.pipeline import FrameResult, Pipeline
 from speed_sign_detector.ros.frame_statistics import (
     LATENCY_WINDOW,
     FrameStatistics,

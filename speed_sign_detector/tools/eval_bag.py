@@ -418,7 +418,8 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
         SpeedSignError: (BagError, TruthFileError, ...) when nothing could be processed.
     """
     from speed_sign_detector.image_conversion import message_to_gray
-    from speed_sign_detector.pipeline import OverlappedPipeline, Pipeline
+    from speed_sign_detector.overlapped_pipeline import OverlappedPipeline
+    from speed_sign_detector.pipeline import Pipeline
     from speed_sign_detector.tools.contact_sheet import ContactSheetCollector
     from speed_sign_detector.tools.results_bag import ResultsBagWriter
 
