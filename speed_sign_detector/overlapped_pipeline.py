@@ -71,8 +71,9 @@ class OverlappedPipeline:
         # the frame waiting for a helper: (sequence number, frame, context)
         self._waiting: tuple[int, DetectedFrame, Any] | None = None
         self._submitted = 0  # sequence numbers handed out
-        self._next_to_report = 0  # the sequence number whose result goes out next
-        self._in_flight = 0  # frames taken by helpers and not yet reported
+        # the sequence number whose result goes out next: the frames from it to
+        # _submitted are waiting or being classified
+        self._next_to_report = 0
         self._closed = False
         self._helpers: dict[int, threading.Thread] = {}  # by classifier worker
         if overlap:
@@ -113,7 +114,7 @@ class OverlappedPipeline:
     def drain(self) -> None:
         """Block until every submitted frame has been recognized and reported."""
         with self._condition:
-            while (self._waiting is not None or self._in_flight) and any(
+            while self._next_to_report < self._submitted and any(
                     helper.is_alive() for helper in self._helpers.values()):
                 self._condition.wait()
 
@@ -154,7 +155,6 @@ class OverlappedPipeline:
                 if self._waiting is None or worker >= self.pipeline.classifier_workers:
                     return
                 (sequence, detected, context), self._waiting = self._waiting, None
-                self._in_flight += 1
                 self._condition.notify_all()
             classified: ClassifiedFrame | Exception
             try:
@@ -169,7 +169,6 @@ class OverlappedPipeline:
             finally:
                 with self._condition:
                     self._next_to_report += 1
-                    self._in_flight -= 1
                     self._condition.notify_all()
 
     def _report(self, classified: ClassifiedFrame | Exception, context: Any) -> None:

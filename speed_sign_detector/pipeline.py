@@ -105,10 +105,9 @@ class Pipeline:
 
     The detector may hold an OpenGL context: create, close and :meth:`detect` on one
     thread. :meth:`recognize` may run on another thread (one at a time, frames in
-    order), which is what :class:`~speed_sign_detector.overlapped_pipeline.OverlappedPipeline`
-    does; its two steps too, with
-    several classifier workers: :meth:`classify` of different workers at the same time,
-    :meth:`track` one frame at a time in order.
+    order), and so may its two steps: :meth:`classify` of different workers at the same
+    time, :meth:`track` one frame at a time in order. That is what
+    :class:`~speed_sign_detector.overlapped_pipeline.OverlappedPipeline` does.
 
     Example:
         >>> import numpy as np
