@@ -5,6 +5,8 @@ signs through the real feature extractor), so no real data is needed.
 """
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -20,6 +22,7 @@ from speed_sign_detector.recognition.trained_bank import (
     load_trained_bank,
     save_trained_bank,
 )
+from speed_sign_detector.recognition.training import TrainingConfig
 
 LABELS = ('30', '80', 'other_sign')
 
@@ -164,6 +167,8 @@ def test_shipped_bank_is_small_and_records_its_provenance() -> None:
     assert opinion is not None and opinion.form == 'network'
     record = bank.provenance
     assert record['training']['model'] == 'network'
+    # built by `make bank` with today's training defaults (the arched 6 renderings included)
+    assert record['training'] == dataclasses.asdict(TrainingConfig())
     assert record['training']['members'] == opinion.hidden_weights.shape[0]
     assert bank.candidates == record['training']['candidates']
     assert bank.min_lead == record['training']['min_lead']

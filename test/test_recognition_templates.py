@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from speed_sign_detector.recognition.templates import (
+    ARCHED_SIX_GEOMETRY,
     GRAY_TEMPLATE_GEOMETRY,
     SIGN_KINDS,
     gray_template,
@@ -47,6 +48,22 @@ def test_speed_limit_has_red_ring_white_field_black_digits() -> None:
     assert field.mean() > 200, 'white field expected above the digits'
     digits = bgr[70:130, 55:145].mean(axis=2)
     assert (digits < 60).mean() > 0.1, 'black digits expected in the middle'
+
+
+def test_arched_six_closes_the_top_of_the_6_as_an_8_is_closed() -> None:
+    """The older lettering's 6 (``arched_six``) is drawn where the plain 6 is open and
+    the 8 is not, and nothing but a 6 changes."""
+    plain = render_sign('60', 200)[0].mean(axis=2)
+    arched = render_sign('60', 200, ARCHED_SIX_GEOMETRY)[0].mean(axis=2)
+    eight = render_sign('80', 200)[0].mean(axis=2)
+    added = (arched < 80) & (plain > 180)  # the arch, where the plain 6 is white
+    assert added.sum() > 300, 'the arched 6 should add a stroke to the plain one'
+    rows, columns = np.nonzero(added)
+    assert rows.mean() < 100 and columns.mean() < 100, 'the arch is on the top of the first digit'
+    assert (eight[added] < 128).mean() > 0.5, 'most of the arch lies on the 8\'s upper loop'
+    for kind in ('80', '100', '30'):
+        np.testing.assert_array_equal(render_sign(kind, 64, ARCHED_SIX_GEOMETRY)[0],
+                                      render_sign(kind, 64)[0])
 
 
 def test_end_of_limit_has_no_red() -> None:

@@ -50,6 +50,7 @@ from speed_sign_detector.recognition.trained_bank import (
 from speed_sign_detector.recognition.training import (
     TrainingConfig,
     cross_validate,
+    rendered_training_crops,
     train_bank,
 )
 
@@ -381,13 +382,25 @@ def test_linear_second_opinion_still_trains_and_reads_those_signs(crop_folder: P
 def test_train_command_refuses_invalid_settings(tmp_path: Path, crop_folder: Path) -> None:
     out = tmp_path / 'bank.npz'
     env = dict(os.environ, PYTHONWARNINGS='ignore')
-    for option in (['--members', '0'], ['--hidden-units', '0'], ['--candidates', '0']):
+    for option in (['--members', '0'], ['--hidden-units', '0'], ['--candidates', '0'],
+                   ['--arched-six-per-kind', '-1']):
         done = subprocess.run(_train_command() + ['build', str(out), str(crop_folder), '-q']
                               + option, capture_output=True, text=True, timeout=120, env=env)
         assert done.returncode == 1, option
         assert 'invalid training setting' in done.stderr and option[0][2:].replace(
             '-', '_') in done.stderr and 'Traceback' not in done.stderr
         assert not out.exists()
+
+
+def test_arched_six_renderings_follow_the_other_renderings() -> None:
+    """``arched_six_per_kind`` adds 60s in the older lettering after the usual renderings,
+    which stay as they were (a bank trained without them is unchanged)."""
+    plain_crops, plain_labels = rendered_training_crops(1, np.random.default_rng(5))
+    crops, labels = rendered_training_crops(1, np.random.default_rng(5), arched_six_per_kind=3)
+    assert labels == plain_labels + ['60'] * 3
+    for crop, plain in zip(crops, plain_crops):
+        np.testing.assert_array_equal(crop, plain)
+    assert all(crop.ndim == 2 and crop.shape[0] >= 26 for crop in crops[-3:])
 
 
 def _opinion(labels: tuple[str, ...], real: tuple[str, ...]) -> SecondOpinion:

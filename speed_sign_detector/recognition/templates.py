@@ -55,6 +55,9 @@ class SignGeometry:
         digit_width_3: same for three-digit values (narrower lettering).
         stroke: stroke width relative to digit height.
         gap: space between digits relative to digit height.
+        arched_six: draw the 6 with an arched top whose end turns down towards the bowl
+            (a lettering seen on older signs, which a plain renderer would read as an 8)
+            instead of the straight diagonal stem.
         white_bgr, red_bgr, black_bgr, gray_bgr: colours of the sign foils (BGR).
     """
 
@@ -66,6 +69,7 @@ class SignGeometry:
     digit_width_3: float = 0.47
     stroke: float = 0.11
     gap: float = 0.12
+    arched_six: bool = False
     white_bgr: tuple[int, int, int] = WHITE_BGR
     red_bgr: tuple[int, int, int] = RED_BGR
     black_bgr: tuple[int, int, int] = BLACK_BGR
@@ -79,6 +83,8 @@ GEOMETRY = SignGeometry()
 #: The same signs as the classifier's gray templates see them: in the gray frames of
 #: colour cameras the red ring is about as dark as the digits (measured on real crops).
 GRAY_TEMPLATE_GEOMETRY = SignGeometry(red_bgr=(50, 50, 50))
+#: The colour renderings with the older lettering's arched 6 (:attr:`SignGeometry.arched_six`).
+ARCHED_SIX_GEOMETRY = SignGeometry(arched_six=True)
 
 Polyline = np.ndarray  # (n, 2) float64 points, x right, y down
 
@@ -102,11 +108,12 @@ def _pts(*points: tuple[float, float]) -> np.ndarray:
     return np.asarray(points, dtype=np.float64)
 
 
-def _glyph(char: str, w: float) -> tuple[list[np.ndarray], float]:
+def _glyph(char: str, w: float, arched_six: bool = False) -> tuple[list[np.ndarray], float]:
     """Stroke centre lines of one glyph in a box [0, advance] x [0, 1] (y down).
 
-    ``w`` is the centre-line width of a regular digit (height 1). Returns the polylines
-    and the glyph's advance width (centre-line width).
+    ``w`` is the centre-line width of a regular digit (height 1); ``arched_six`` draws the
+    6's top as an arch (:attr:`SignGeometry.arched_six`). Returns the polylines and the
+    glyph's advance width (centre-line width).
     """
     r = w / 2.0
     if char == '0':
@@ -130,7 +137,10 @@ def _glyph(char: str, w: float) -> tuple[list[np.ndarray], float]:
                                 bowl])], w
     if char == '6':
         bowl = _arc(r, 0.67, r, 0.33, 0, 360, 64)
-        stem = _bezier((0.85 * w, 0.0), (0.02 * w, 0.22), (0.0, 0.67))
+        if arched_six:  # up the left side, over the top, the end turned down on the right
+            stem = np.concatenate([_pts((0.0, 0.67)), _arc(r, r, r, r, 180, -18)])
+        else:
+            stem = _bezier((0.85 * w, 0.0), (0.02 * w, 0.22), (0.0, 0.67))
         return [bowl, stem], w
     if char == '9':
         strokes, adv = _glyph('6', w)
@@ -160,7 +170,7 @@ def _glyph(char: str, w: float) -> tuple[list[np.ndarray], float]:
 
 
 def _text_strokes(text: str, height: float, digit_width: float, stroke: float,
-                  gap: float) -> tuple[list[np.ndarray], float]:
+                  gap: float, arched_six: bool = False) -> tuple[list[np.ndarray], float]:
     """Polylines of a text centred at (0, 0) in units where the glyph outer height is
     ``height``; returns the polylines and the stroke width in the same units."""
     stroke_w = stroke * height
@@ -169,7 +179,7 @@ def _text_strokes(text: str, height: float, digit_width: float, stroke: float,
     lines: list[np.ndarray] = []
     x = 0.0
     for index, char in enumerate(text):
-        strokes, adv = _glyph(char, w)
+        strokes, adv = _glyph(char, w, arched_six)
         lines.extend(s + np.array([x, 0.0]) for s in strokes)
         x += adv + (gap * height + stroke_w) / centre_h
         if index == len(text) - 1:
@@ -230,7 +240,8 @@ def _draw_number(canvas: _Canvas, text: str, geometry: SignGeometry,
     three = len(text) >= 3
     height = geometry.digit_height_3 if three else geometry.digit_height_2
     width = geometry.digit_width_3 if three else geometry.digit_width
-    lines, stroke_w = _text_strokes(text, height, width, geometry.stroke, geometry.gap)
+    lines, stroke_w = _text_strokes(text, height, width, geometry.stroke, geometry.gap,
+                                    geometry.arched_six)
     canvas.polylines(lines, stroke_w, colour)
 
 

@@ -70,15 +70,19 @@ from speed_sign_detector.recognition.scene_validation import cross_validate_scen
 from speed_sign_detector.recognition.second_opinion import fit_second_opinion
 from speed_sign_detector.recognition.sign_features import aligned_patches, sign_features
 from speed_sign_detector.recognition.templates import (
+    ARCHED_SIX_GEOMETRY,
     END_OF_LIMIT_KINDS,
+    GEOMETRY,
     LIMIT_VALUES_KMH,
     LOOKALIKE_KINDS,
+    SignGeometry,
     gray_template,
 )
 from speed_sign_detector.recognition.trained_bank import NO_BANK_FILE, TrainedBank
 
 __all__ = ['MIN_LEAD_OF_MODEL', 'SECOND_OPINION_MODELS', 'LocatedCrops', 'TrainingConfig',
-           'cross_validate', 'locate_signs', 'train_bank', 'train_from_located']
+           'cross_validate', 'locate_signs', 'rendered_training_crops', 'train_bank',
+           'train_from_located']
 
 _LOG = logging.getLogger(__name__)
 #: Called with (done, total) as crops are processed.
@@ -112,6 +116,9 @@ class TrainingConfig:
         rendered_per_kind: rendered, degraded crops of every sign kind the package draws
             (all limits, end-of-limit signs, look-alikes) added to the second opinion's
             training, so that it knows the values with no real examples.
+        arched_six_per_kind: more rendered crops of each limit whose value has a 6 (60),
+            drawn with the older lettering's arched 6 (:attr:`.templates.SignGeometry.arched_six`),
+            which the real crops rarely show and the rest of the classifier reads as 8.
         scene_copies: degraded copies of each example cut from annotated scenes
             (:mod:`.scene_examples`).
         second_opinion: train the second opinion at all.
@@ -133,6 +140,7 @@ class TrainingConfig:
     augmented_copies: int = 4
     examples_per_class: int = 0
     rendered_per_kind: int = 100
+    arched_six_per_kind: int = 200
     scene_copies: int = 2
     second_opinion: bool = True
     real_filter_weight: float = 0.25
@@ -146,7 +154,8 @@ class TrainingConfig:
         for name in ('hidden_units', 'epochs', 'members', 'candidates'):
             if getattr(self, name) < 1:
                 raise ValueError(f'{name} must be >= 1, got {getattr(self, name)}')
-        for name in ('augmented_copies', 'rendered_per_kind', 'scene_copies',
+        for name in ('augmented_copies', 'rendered_per_kind', 'arched_six_per_kind',
+                     'scene_copies',
                      'real_filter_weight', 'real_filter_noise'):
             if getattr(self, name) < 0:
                 raise ValueError(f'{name} must be >= 0, got {getattr(self, name)}')
@@ -240,11 +249,29 @@ def locate_signs(classifier: Classifier, crops: Sequence[LabelledCrop],
     return LocatedCrops(tuple(crops), signs, tuple(images), tuple(found))
 
 
-def rendered_training_crops(per_kind: int, rng: np.random.Generator
+def _rendered_crop(kind: str, rng: np.random.Generator,
+                   geometry: SignGeometry = GEOMETRY) -> np.ndarray:
+    """One rendered crop (GTSRB framing) of ``kind`` at a random size (diameter 16-60
+    px), angle and background, degraded."""
+    diameter = float(rng.uniform(16.0, 60.0))
+    margin = max(5.0, 0.1 * diameter)
+    canvas = int(round(diameter + 2 * margin))
+    crop = gray_template(kind, int(round(diameter)), canvas,
+                         background=float(rng.uniform(40, 200)),
+                         yaw_deg=float(rng.uniform(-25, 25)),
+                         pitch_deg=float(rng.uniform(-10, 10)),
+                         roll_deg=float(rng.uniform(-6, 6)), geometry=geometry)
+    return degraded(crop, rng)
+
+
+def rendered_training_crops(per_kind: int, rng: np.random.Generator,
+                            arched_six_per_kind: int = 0
                             ) -> tuple[list[np.ndarray], list[str]]:
     """Rendered crops (GTSRB framing) of every limit, end-of-limit sign and look-alike the
     package draws, seen at random sizes (diameter 16-60 px), angles, backgrounds and
-    degradations; returns (gray crops, labels)."""
+    degradations, ``per_kind`` of each; then ``arched_six_per_kind`` more of each limit
+    whose value has a 6, drawn with the older lettering's arched 6
+    (:data:`.templates.ARCHED_SIX_GEOMETRY`). Returns (gray crops, labels)."""
     kinds = ([str(v) for v in LIMIT_VALUES_KMH] + list(END_OF_LIMIT_KINDS)[::3]
              + list(LOOKALIKE_KINDS))
     crops: list[np.ndarray] = []
@@ -253,16 +280,12 @@ def rendered_training_crops(per_kind: int, rng: np.random.Generator
         label = kind if kind.isdigit() else (
             'end_of_limit' if kind.startswith('end_of_limit') else 'other_sign')
         for _ in range(per_kind):
-            diameter = float(rng.uniform(16.0, 60.0))
-            margin = max(5.0, 0.1 * diameter)
-            canvas = int(round(diameter + 2 * margin))
-            crop = gray_template(kind, int(round(diameter)), canvas,
-                                 background=float(rng.uniform(40, 200)),
-                                 yaw_deg=float(rng.uniform(-25, 25)),
-                                 pitch_deg=float(rng.uniform(-10, 10)),
-                                 roll_deg=float(rng.uniform(-6, 6)))
-            crops.append(degraded(crop, rng))
+            crops.append(_rendered_crop(kind, rng))
             labels.append(label)
+    for kind in (str(v) for v in LIMIT_VALUES_KMH if '6' in str(v)):
+        for _ in range(arched_six_per_kind):
+            crops.append(_rendered_crop(kind, rng, ARCHED_SIX_GEOMETRY))
+            labels.append(kind)
     return crops, labels
 
 
@@ -376,7 +399,8 @@ def locate_rendered(classifier: Classifier, config: TrainingConfig) -> LocatedCr
     if config.rendered_per_kind <= 0 or not config.second_opinion:
         return None
     images, labels = rendered_training_crops(config.rendered_per_kind,
-                                             np.random.default_rng(config.seed + 1))
+                                             np.random.default_rng(config.seed + 1),
+                                             config.arched_six_per_kind)
     crops = [_RenderedCrop(label) for label in labels]
     return locate_signs(classifier, crops, images)  # type: ignore[arg-type]
 

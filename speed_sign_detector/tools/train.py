@@ -91,6 +91,11 @@ def build_parser() -> argparse.ArgumentParser:
                         help='rendered, degraded crops of every sign kind the package draws '
                         'added to the second opinion\'s training (values without real '
                         'examples: 5, 10, 40, 90, 110, 130 km/h)')
+    common.add_argument('--arched-six-per-kind', type=int,
+                        default=_DEFAULTS.arched_six_per_kind,
+                        help='more rendered crops of each limit with a 6 (60 km/h), drawn '
+                        'with the older lettering\'s arched 6, which real crops rarely '
+                        'show and the rest of the classifier reads as 8')
     common.add_argument('--scenes', type=Path, action='append', default=[],
                         metavar='SCENE_DIR', help='annotated scene folder (GTSDB format: '
                         'images/ and gt.txt) to learn real signs and background from; '
@@ -142,6 +147,7 @@ def _configs(args: argparse.Namespace
                                   min_lead=min_lead, augmented_copies=args.augmented_copies,
                                   examples_per_class=args.examples_per_class,
                                   rendered_per_kind=args.rendered_per_kind,
+                                  arched_six_per_kind=args.arched_six_per_kind,
                                   scene_copies=args.scene_copies,
                                   second_opinion=not args.no_second_opinion,
                                   real_filter_weight=args.real_filter_weight,
