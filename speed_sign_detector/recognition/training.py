@@ -118,7 +118,8 @@ class TrainingConfig:
             training, so that it knows the values with no real examples.
         arched_six_per_kind: more rendered crops of each limit whose value has a 6 (60),
             drawn with the older lettering's arched 6 (:attr:`.templates.SignGeometry.arched_six`),
-            which the real crops rarely show and the rest of the classifier reads as 8.
+            which the real crops rarely show and the rest of the classifier reads as 8
+            (like the other renderings, only where ``rendered_per_kind`` > 0).
         scene_copies: degraded copies of each example cut from annotated scenes
             (:mod:`.scene_examples`).
         second_opinion: train the second opinion at all.
@@ -155,8 +156,7 @@ class TrainingConfig:
             if getattr(self, name) < 1:
                 raise ValueError(f'{name} must be >= 1, got {getattr(self, name)}')
         for name in ('augmented_copies', 'rendered_per_kind', 'arched_six_per_kind',
-                     'scene_copies',
-                     'real_filter_weight', 'real_filter_noise'):
+                     'scene_copies', 'real_filter_weight', 'real_filter_noise'):
             if getattr(self, name) < 0:
                 raise ValueError(f'{name} must be >= 0, got {getattr(self, name)}')
 
