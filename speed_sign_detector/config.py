@@ -10,7 +10,8 @@ Parameter names are ``<section>.<field>``, e.g. ``detector.min_radius_px``.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+import difflib
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -25,11 +26,21 @@ def setting(default: Any, description: str, *, low: float | None = None,
         'description': description, 'low': low, 'high': high, 'choices': choices})
 
 
+def parameter_name(config: Any, field_name: str) -> str:
+    """The name a user gives a config field: ``section.field`` for a stage's config
+    (``detector.min_radius_px``), the bare field name for the top-level ones."""
+    for section, config_class in SECTIONS.items():
+        if type(config) is config_class:
+            return f'{section}.{field_name}'
+    return field_name
+
+
 def validate(config: Any) -> None:
     """Check every field of a config dataclass against its declared range.
 
     Raises:
-        ConfigError: naming the field, the value and the allowed range.
+        ConfigError: naming the parameter as a user writes it (``detector.min_radius_px``),
+            the value and the allowed range.
     """
     for item in dataclasses.fields(config):
         value = getattr(config, item.name)
@@ -41,17 +52,17 @@ def validate(config: Any) -> None:
             object.__setattr__(config, item.name, float(value))
             value = float(value)
         if expected_type is not None and not isinstance(value, expected_type):
-            raise ConfigError(f'{type(config).__name__}.{item.name} must be '
+            raise ConfigError(f'{parameter_name(config, item.name)} must be '
                               f'{expected_type.__name__}, got {value!r}')
         low, high, choices = meta.get('low'), meta.get('high'), meta.get('choices')
         if low is not None and value < low:
-            raise ConfigError(f'{type(config).__name__}.{item.name} = {value!r} is below '
+            raise ConfigError(f'{parameter_name(config, item.name)} = {value!r} is below '
                               f'its minimum {low}')
         if high is not None and value > high:
-            raise ConfigError(f'{type(config).__name__}.{item.name} = {value!r} is above '
+            raise ConfigError(f'{parameter_name(config, item.name)} = {value!r} is above '
                               f'its maximum {high}')
         if choices is not None and value not in choices:
-            raise ConfigError(f'{type(config).__name__}.{item.name} = {value!r} is not one '
+            raise ConfigError(f'{parameter_name(config, item.name)} = {value!r} is not one '
                               f'of {", ".join(choices)}')
 
 
@@ -145,8 +156,8 @@ class DetectorConfig:
     def __post_init__(self) -> None:
         validate(self)
         if self.max_radius_px <= self.min_radius_px:
-            raise ConfigError(f'DetectorConfig.max_radius_px ({self.max_radius_px}) must be '
-                              f'larger than min_radius_px ({self.min_radius_px})')
+            raise ConfigError(f'detector.max_radius_px ({self.max_radius_px}) must be '
+                              f'larger than detector.min_radius_px ({self.min_radius_px})')
 
 
 @dataclass(frozen=True)
@@ -295,8 +306,9 @@ class ClassifierConfig:
     def __post_init__(self) -> None:
         validate(self)
         if self.max_radius_px <= self.min_radius_px:
-            raise ConfigError(f'ClassifierConfig.max_radius_px ({self.max_radius_px}) must '
-                              f'be larger than min_radius_px ({self.min_radius_px})')
+            raise ConfigError(f'classifier.max_radius_px ({self.max_radius_px}) must '
+                              f'be larger than classifier.min_radius_px '
+                              f'({self.min_radius_px})')
 
 
 @dataclass(frozen=True)
@@ -365,7 +377,7 @@ class PipelineConfig:
     def __post_init__(self) -> None:
         validate(self)
         if self.classifier_workers > 1 and not self.classifier_process:
-            raise ConfigError(f'PipelineConfig.classifier_workers ({self.classifier_workers}) '
+            raise ConfigError(f'classifier_workers ({self.classifier_workers}) '
                               'above 1 needs classifier_process: true (several classifiers '
                               'in one interpreter would take turns with its GIL)')
 
@@ -454,6 +466,19 @@ def to_parameters(config: PipelineConfig) -> dict[str, Any]:
     return flat
 
 
+def closest_parameter(name: str, known: Iterable[str]) -> str | None:
+    """The known parameter name most like ``name`` (a misspelling of it), or None."""
+    matches = difflib.get_close_matches(name, list(known), n=1, cutoff=0.6)
+    return matches[0] if matches else None
+
+
+def unknown_parameter_message(name: str, known: Iterable[str]) -> str:
+    """``unknown parameter X (did you mean Y?)``: one short clause, no list of all names."""
+    guess = closest_parameter(name, known)
+    hint = f'did you mean {guess}?' if guess else 'see config/speed_sign_detector.yaml'
+    return f'unknown parameter {name} ({hint})'
+
+
 def from_parameters(values: Mapping[str, Any],
                     base: PipelineConfig | None = None) -> PipelineConfig:
     """Build a config from flat ``section.field`` values over ``base`` (defaults).
@@ -465,8 +490,9 @@ def from_parameters(values: Mapping[str, Any],
     known = {spec.name for spec in parameter_specs()}
     unknown = sorted(set(values) - known)
     if unknown:
-        raise ConfigError(f'unknown parameter(s): {", ".join(unknown)}; known are: '
-                          f'{", ".join(sorted(known))}')
+        suggestible = known | {spec.name for spec in node_option_specs()}
+        raise ConfigError('; '.join(unknown_parameter_message(name, suggestible)
+                                    for name in unknown))
     sections: dict[str, dict[str, Any]] = {name: {} for name in SECTIONS}
     top: dict[str, Any] = {}
     for name, value in values.items():

@@ -41,6 +41,31 @@ def test_invalid_values_are_rejected_with_a_reason(values: dict, message: str) -
         from_parameters(values)
 
 
+def test_unknown_parameter_names_the_closest_known_one_only() -> None:
+    with pytest.raises(ConfigError) as caught:
+        from_parameters({'detector.min_raduis_px': 6.0})
+    message = str(caught.value)
+    assert 'detector.min_raduis_px' in message
+    assert 'did you mean detector.min_radius_px?' in message
+    others = [spec.name for spec in parameter_specs() if spec.name != 'detector.min_radius_px']
+    assert not [name for name in others if name in message]
+
+
+@pytest.mark.parametrize('values, name', [
+    ({'detector.min_radius_px': 'six'}, 'detector.min_radius_px must be float'),
+    ({'classifier.psr_threshold': -1.0}, 'classifier.psr_threshold = -1.0 is below'),
+    ({'tracker.window_frames': 0}, 'tracker.window_frames = 0 is below'),
+    ({'classifier.min_radius_px': 30.0, 'classifier.max_radius_px': 20.0},
+     'classifier.max_radius_px (20.0) must be larger than classifier.min_radius_px'),
+    ({'backend': 3}, 'backend must be str'),
+])
+def test_invalid_values_name_the_parameter_as_written(values: dict, name: str) -> None:
+    with pytest.raises(ConfigError) as caught:
+        from_parameters(values)
+    assert name in str(caught.value)
+    assert 'Config.' not in str(caught.value)
+
+
 def test_integer_given_for_float_is_accepted() -> None:
     assert DetectorConfig(min_radius_px=6).min_radius_px == 6.0
 
