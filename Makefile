@@ -48,9 +48,10 @@ bank: $(INSTALLED)
 	OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 $(BIN)/speed_sign_train build speed_sign_detector/recognition/data/default_bank.npz \
 		$(DATA)/gtsrb-dev $(DATA)/gtsrb-lookalikes-dev --scenes $(DATA)/gtsdb-dev
 
-## bench: accuracy and speed against the peers, written to out/bench/
+## bench: accuracy and speed against the peers: results.json, table and plots in out/bench/,
+## and bench/RESULTS.md generated from them
 bench: $(INSTALLED)
-	$(BIN)/python bench/run_all.py --out $(OUT)/bench
+	$(BIN)/python bench/run_all.py --out $(OUT)/bench --results-md bench/RESULTS.md
 
 clean:
 	rm -rf $(VENV) build install log $(OUT) *.egg-info

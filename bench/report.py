@@ -4,7 +4,10 @@
 ``run_all.py`` calls these functions; run on its own, this module redraws the table
 and the plots of a saved run::
 
-    python bench/report.py out/bench/results.json [--out DIR]
+    python bench/report.py out/bench/results.json [--out DIR] [--results-md bench/RESULTS.md]
+
+(``--results-md`` renders bench/RESULTS.md again from the saved run, see
+``results_markdown.py``.)
 
 Plots (PNG, matplotlib with the Agg backend):
     ``detector_time_vs_frame_size.png``: median ms per frame vs megapixels, per method;
@@ -337,9 +340,16 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('results', type=Path, help='results.json written by run_all.py')
     parser.add_argument('--out', type=Path, help='folder for the plots (default: beside it)')
+    parser.add_argument('--results-md', type=Path, metavar='PATH',
+                        help='also render the Markdown report (bench/RESULTS.md) there')
     args = parser.parse_args(argv)
     results = json.loads(args.results.read_text())
     print(format_table(results))
+    if args.results_md is not None:
+        from results_markdown import write_results_markdown  # a sibling script of bench/
+
+        write_results_markdown(results, args.results_md)
+        print(f'wrote {args.results_md}', file=sys.stderr)
     for path in write_plots(results, args.out or args.results.parent):
         print(f'wrote {path}', file=sys.stderr)
     return 0

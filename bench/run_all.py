@@ -37,10 +37,12 @@ end to end
 The papers' headline figures are printed beside them, labelled as quoted.
 
 Output under ``--out DIR``: ``results.json``, ``table.txt`` (the table printed) and PNG
-plots (see ``report.py``). ``--quick`` uses a handful of frames/crops (smoke test, not
-figures to quote). Usage::
+plots (see ``report.py``); with ``--results-md PATH`` also the Markdown report
+(``results_markdown.py``; ``make bench`` writes bench/RESULTS.md so). ``--quick`` uses a
+handful of frames/crops (smoke test, not figures to quote). Usage::
 
-    python bench/run_all.py --out out/bench [--quick] [--skip-node] [--params FILE|defaults]
+    python bench/run_all.py --out out/bench [--results-md bench/RESULTS.md] [--quick]
+        [--skip-node] [--params FILE|defaults]
 """
 from __future__ import annotations
 
@@ -75,6 +77,7 @@ import bench_classifier  # noqa: E402
 import bench_detector  # noqa: E402
 import bench_inputs  # noqa: E402
 import report  # noqa: E402
+import results_markdown  # noqa: E402
 
 from speed_sign_detector.config import (  # noqa: E402
     ClassifierConfig,
@@ -156,6 +159,8 @@ class BenchSettings:
         classifier_config: overrides the parameter file's classifier config (tests).
         bank_cache: filter-bank cache folder shared by the classifier, pipeline and node.
         quick: recorded in the JSON: figures from a smoke run, not to be quoted.
+        results_md: where to write the Markdown report (bench/RESULTS.md for ``make
+            bench``); None = not written.
         command: the command line, recorded in the JSON.
     """
 
@@ -177,6 +182,7 @@ class BenchSettings:
     classifier_config: ClassifierConfig | None = None
     bank_cache: Path = BANK_CACHE
     quick: bool = False
+    results_md: Path | None = None
     command: tuple[str, ...] = field(default_factory=tuple)
 
 
@@ -499,9 +505,18 @@ def node_stage(settings: BenchSettings) -> dict[str, object]:
 
 
 # ----------------------------------------------------------------------------- driver
+def cpu_model() -> str:
+    """The CPU's model name (/proc/cpuinfo on Linux), else what ``platform`` says."""
+    with contextlib.suppress(OSError):
+        for line in Path('/proc/cpuinfo').read_text().splitlines():
+            if line.lower().startswith(('model name', 'hardware')) and ':' in line:
+                return line.split(':', 1)[1].strip()
+    return platform.processor() or platform.machine()
+
+
 def _machine() -> dict[str, object]:
     load = os.getloadavg() if hasattr(os, 'getloadavg') else None
-    return {'cpus': os.cpu_count(), 'platform': platform.platform(),
+    return {'cpus': os.cpu_count(), 'cpu_model': cpu_model(), 'platform': platform.platform(),
             'processor': platform.processor() or platform.machine(),
             'python': platform.python_version(), 'opencv': cv2.__version__,
             'load_average_at_start': list(load) if load else None}
@@ -511,7 +526,8 @@ Stage = Callable[[BenchSettings], dict[str, object]]
 
 
 def run_benchmark(settings: BenchSettings) -> dict[str, object]:
-    """Run every stage, write results.json, table.txt and the plots; returns the results.
+    """Run every stage, write results.json, table.txt, the plots and (when
+    ``settings.results_md`` is set) the Markdown report; returns the results.
 
     A stage that fails is recorded as ``{'error': message}`` (and reported) while the
     others still run.
@@ -549,6 +565,8 @@ def run_benchmark(settings: BenchSettings) -> dict[str, object]:
     results['plots'] = [str(path) for path in report.write_plots(results, settings.out_dir)]
     report.write_json(results, settings.out_dir / 'results.json')
     (settings.out_dir / 'table.txt').write_text(table + '\n')
+    if settings.results_md is not None:
+        results_markdown.write_results_markdown(results, settings.results_md)
     print(table)
     return results
 
@@ -557,6 +575,9 @@ def main(argv: list[str] | None = None) -> int:
     """Parse the options, run, print the table; 1 when a stage failed."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--out', type=Path, required=True, help='output folder')
+    parser.add_argument('--results-md', type=Path, metavar='PATH',
+                        help='also write the Markdown report there (make bench: '
+                             'bench/RESULTS.md)')
     parser.add_argument('--quick', action='store_true',
                         help='a few frames/crops only (smoke test; figures not to quote)')
     parser.add_argument('--gtsdb', type=Path, default=DATA_DIR / 'gtsdb-dev')
@@ -583,6 +604,7 @@ def main(argv: list[str] | None = None) -> int:
     params = None if args.params == 'defaults' else Path(args.params)
     settings = BenchSettings(out_dir=args.out, gtsdb_dir=args.gtsdb, gtsrb_dir=args.gtsrb,
                              pipeline_params=params, quick=args.quick, command=command,
+                             results_md=args.results_md,
                              **overrides)
     for folder in (settings.gtsdb_dir, settings.gtsrb_dir):
         if not folder.is_dir():
@@ -593,8 +615,9 @@ def main(argv: list[str] | None = None) -> int:
     failed = [name for name, value in results.items()
               if isinstance(value, dict) and 'error' in value]
     print(f'\nwrote {settings.out_dir}/results.json, table.txt and {len(results["plots"])} '
-          f'plots in {results["elapsed_s"]:.0f} s' + (f'; FAILED stages: {failed}' if failed
-                                                      else ''))
+          f'plots' + (f', and {settings.results_md}' if settings.results_md else '')
+          + f' in {results["elapsed_s"]:.0f} s'
+          + (f'; FAILED stages: {failed}' if failed else ''))
     return 1 if failed else 0
 
 

@@ -55,7 +55,8 @@ def results(run_all, shared_data_dir: Path, tmp_path_factory: pytest.TempPathFac
         gradient_thresholds=(40.0, 120.0), crop_every=1500, speed_frames=1,
         pipeline_frames=3, node_seconds=0.0, pipeline_params=None,
         classifier_config=ClassifierConfig(max_radius_px=24.0),
-        bank_cache=out / 'banks', quick=True, command=('test',))
+        bank_cache=out / 'banks', quick=True, results_md=out / 'report' / 'RESULTS.md',
+        command=('test',))
     returned = run_all.run_benchmark(settings)
     return {'returned': returned, 'out': out}
 
@@ -78,6 +79,20 @@ def test_writes_json_table_and_plots(results: dict) -> None:
         assert (out / name).read_bytes()[:8] == b'\x89PNG\r\n\x1a\n', name
     table = (out / 'table.txt').read_text()
     assert 'QUOTED' in table and 'plain NCC' in table and 'radsym RSD' in table
+
+
+def test_writes_the_markdown_report_of_the_run(results: dict) -> None:
+    """``results_md`` (``make bench``: bench/RESULTS.md) is the renderer's text of this
+    very run, marked as a smoke run, with the host's GL renderer named in its summary."""
+    out: Path = results['out']
+    written = (out / 'report' / 'RESULTS.md').read_text()
+    saved = json.loads((out / 'results.json').read_text())
+    markdown = bench_module('results_markdown')
+    assert written == markdown.render_results_markdown(saved)
+    assert markdown.SMOKE_NOTE in written
+    summary = written.split('## Summary', 1)[1].split('\n## ', 1)[0]
+    assert saved['detector']['renderer'] in summary
+    assert saved['machine']['cpu_model'] in summary
 
 
 def test_detector_section_has_every_method_size_and_sweep(results: dict) -> None:

@@ -48,15 +48,15 @@ import numpy as np
 
 from speed_sign_detector.config import ClassifierConfig, load_yaml
 from speed_sign_detector.errors import TrainingDataError, TruthFileError
-from speed_sign_detector.recognition.classifier import Classification, Classifier
-from speed_sign_detector.recognition.crop_framing import CROP_FRAMINGS
-from speed_sign_detector.recognition.labelled_crops import (
+from speed_sign_detector.labelled_crops import (
     GTSRB_END_OF_80,
     GTSRB_LIMITS_KMH,
     GTSRB_LOOKALIKE_NAMES,
     LABELS_HEADER,
     read_label_rows,
 )
+from speed_sign_detector.recognition.classifier import Classification, Classifier
+from speed_sign_detector.recognition.crop_framing import CROP_FRAMINGS
 from speed_sign_detector.tools.image_files import (
     UnreadableImage,
     UnreadableImageError,

@@ -1,0 +1,320 @@
+"""bench/RESULTS.md rendered from the ``results.json`` of one ``run_all.py`` run.
+
+``make bench`` writes it (``run_all.py --results-md bench/RESULTS.md``); ``report.py
+results.json --results-md PATH`` renders it again from a saved run. The file is generated,
+never edited by hand: a summary first (the host, then today's accuracy and speed of each
+stage against the peers), then one table per benchmark. It holds the figures of that one
+run only; older runs live in git's history.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+#: Labels of the detector methods (the keys of results['detector']['sizes'][...]['methods']).
+METHOD_LABELS: dict[str, str] = {
+    'gl': 'ours, GL (default vote method)',
+    'gl_raster': 'ours, GL raster (the paper\'s)',
+    'gl_scatter': 'ours, GL scatter',
+    'numpy': 'ours, numpy reference',
+    'hough_gradient': 'cv2 HOUGH_GRADIENT',
+    'hough_gradient_alt': 'cv2 HOUGH_GRADIENT_ALT',
+    'radsym_rsd': 'radsym RSD',
+    'radsym_frst': 'radsym FRST',
+}
+
+SMOKE_NOTE = ('> **Smoke run** (`--quick`): a handful of frames and crops, run to check the '
+              'machinery. These figures are not measurements; run `make bench` for them.')
+
+
+def _number(value: float | None, digits: int = 1) -> str:
+    """``value`` with ``digits`` decimals, or '-' for None and NaN."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return '-'
+    return f'{value:.{digits}f}'
+
+
+def _label(method: str) -> str:
+    return METHOD_LABELS.get(method, method)
+
+
+def _table(header: Sequence[str], rows: Sequence[Sequence[str]],
+           right_aligned_from: int = 1) -> list[str]:
+    """A Markdown table; columns from ``right_aligned_from`` on are right-aligned."""
+    rule = ['---' if index < right_aligned_from else '---:' for index in range(len(header))]
+    return ['| ' + ' | '.join(header) + ' |', '|' + '|'.join(rule) + '|'] + [
+        '| ' + ' | '.join(row) + ' |' for row in rows]
+
+
+def _problem(section: Any) -> str | None:
+    """Why a stage has no figures ('failed: ...', 'not run: ...'), or None when it has."""
+    if not isinstance(section, Mapping):
+        return 'not run'
+    if 'error' in section:
+        return f"failed: {section['error']}"
+    if 'skipped' in section:
+        return f"not run: {section['skipped']}"
+    return None
+
+
+def gl_renderer(results: Mapping[str, Any]) -> str:
+    """The GL renderer the run measured (detector stage, else pipeline), or 'unknown'."""
+    for stage in ('detector', 'pipeline', 'node'):
+        section = results.get(stage)
+        if isinstance(section, Mapping) and section.get('renderer'):
+            return str(section['renderer'])
+    return 'unknown'
+
+
+def host_line(results: Mapping[str, Any]) -> str:
+    """The host in words: CPU model, core count, GL renderer, OS, Python, OpenCV."""
+    machine: Mapping[str, Any] = results.get('machine', {})
+    cpu = machine.get('cpu_model') or machine.get('processor') or 'unknown CPU'
+    detector = results.get('detector')
+    software = isinstance(detector, Mapping) and detector.get('software_renderer')
+    kind = ' (a software renderer: the GL work runs on the CPU cores)' if software else ''
+    return (f"{cpu}, {machine.get('cpus', '?')} cores; GL renderer {gl_renderer(results)}"
+            f"{kind}; {machine.get('platform', '?')}, Python {machine.get('python', '?')}, "
+            f"OpenCV {machine.get('opencv', '?')}")
+
+
+# ------------------------------------------------------------------------------ summary
+def _detector_summary(detector: Mapping[str, Any]) -> list[str]:
+    """Summary rows of the detector: ours against the fastest peer and the best-recall one."""
+    rows = []
+    for name, size in detector['sizes'].items():
+        if size['signs'] is None:
+            continue
+        methods = size['methods']
+        peers = [m for m in methods if not m.startswith('gl') and m != 'numpy']
+        ours = methods['gl']
+        fastest = min(peers, key=lambda m: methods[m]['median_ms'])
+        best = max(peers, key=lambda m: methods[m]['recall'] or 0.0)
+        rows.append([
+            f"detector, {name}: candidate recall@{detector['top_n']}, median ms per frame",
+            f"recall {_number(ours['recall'], 3)}, {_number(ours['median_ms'])} ms",
+            f"fastest: {_label(fastest)}, recall {_number(methods[fastest]['recall'], 3)}, "
+            f"{_number(methods[fastest]['median_ms'])} ms; highest recall: {_label(best)}, "
+            f"recall {_number(methods[best]['recall'], 3)}, "
+            f"{_number(methods[best]['median_ms'])} ms"])
+    return rows
+
+
+def summary_lines(results: Mapping[str, Any]) -> list[str]:
+    """The summary: host, then one row per stage (ours against the peers)."""
+    lines = ['## Summary', '', f'Host: {host_line(results)}.', '']
+    rows: list[list[str]] = []
+    detector = results.get('detector')
+    if _problem(detector):
+        rows.append(['detector', _problem(detector) or '', ''])
+    else:
+        rows += _detector_summary(detector)
+    classifier = results.get('classifier')
+    if _problem(classifier):
+        rows.append(['classifier', _problem(classifier) or '', ''])
+    else:
+        seen = ' (crops the shipped bank was trained on)' \
+            if classifier.get('crops_seen_in_training') else ''
+        rows.append([f"classifier, {classifier['crops']} GTSRB-dev crops{seen}: accuracy, "
+                     f"ms per crop",
+                     f"{_number(classifier['classifier_accuracy'], 3)}, "
+                     f"{_number(classifier['classifier_ms_per_crop'], 2)} ms",
+                     f"plain NCC: {_number(classifier['ncc_baseline_accuracy'], 3)}, "
+                     f"{_number(classifier['ncc_baseline_ms_per_crop'], 2)} ms"])
+    pipeline = results.get('pipeline')
+    if _problem(pipeline):
+        rows.append(['pipeline', _problem(pipeline) or '', ''])
+    else:
+        rows.append([f"pipeline, {pipeline['width']}x{pipeline['height']} synthetic drive: "
+                     f"frames per second",
+                     f"{_number(pipeline.get('overlapped_fps'))} fps overlapped, "
+                     f"{_number(pipeline['fps'])} serial", '-'])
+    node = results.get('node')
+    if _problem(node):
+        rows.append(['node through DDS', _problem(node) or '', ''])
+    else:
+        for rate in node['rates']:
+            rows.append([f"node through DDS, {node['width']}x{node['height']} at "
+                         f"{rate['publish_hz']:g} Hz: frames answered per second",
+                         f"{_number(rate['output_fps'])} fps, "
+                         f"{rate['dropped']} of {rate['published']} unanswered", '-'])
+    lines += _table(['benchmark', 'ours', 'peers'], rows, right_aligned_from=3)
+    if isinstance(classifier, Mapping) and classifier.get('crops_seen_in_training'):
+        lines += ['', 'The shipped bank learned from gtsrb-dev, so its accuracy on those '
+                  'crops is not a held-out figure; held-out figures come from `speed_sign_train '
+                  'validate` (k folds split by track), see the README.']
+    return lines
+
+
+# ------------------------------------------------------------------------ one per stage
+def detector_lines(detector: Mapping[str, Any]) -> list[str]:
+    """Detector tables: time and recall per method and size; recall by radius; sweeps."""
+    sizes: Mapping[str, Any] = detector['sizes']
+    lines = ['## Detector', '',
+             f"GTSDB-dev scenes holding a speed-limit sign ({detector['frames_available']} "
+             f"available; frames used per size below), top-{detector['top_n']} candidates; a "
+             f"sign is found when a candidate centre lies within max(3, 0.35 r) px of it. "
+             f"Default vote method: {detector.get('gl_vote_method', '?')}.", '']
+    header = ['method']
+    for name, size in sizes.items():
+        header.append(f'{name} ms')
+        if size['signs'] is not None:
+            header.append(f'{name} recall')
+    rows = []
+    for method in next(iter(sizes.values()))['methods']:
+        row = [_label(method)]
+        for size in sizes.values():
+            item = size['methods'][method]
+            row.append(_number(item['median_ms']))
+            if size['signs'] is not None:
+                row.append(_number(item['recall'], 3))
+        rows.append(row)
+    lines += _table(header, rows)
+    lines += ['', 'Frames (signs): ' + ', '.join(
+        f"{name} {size['how']} {size['frames']}"
+        + (f" ({size['signs']})" if size['signs'] is not None else ' (time only)')
+        for name, size in sizes.items()) + '.']
+    floors = [f"{name} {_number(size['gl_floor_ms'], 2)} ms" for name, size in sizes.items()
+              if size.get('gl_floor_ms') is not None]
+    if floors:
+        lines.append('Least time of a GL pass (frame upload, one trivial compute pass, read '
+                     'back): ' + ', '.join(floors) + '.')
+    native = next((name for name, size in sizes.items()
+                   if size['how'] == 'native' and size.get('signs_by_radius_px')), None)
+    if native:
+        counts: Mapping[str, int] = sizes[native]['signs_by_radius_px']
+        lines += ['', f'### Recall by sign radius, {native}', '']
+        lines += _table(['method'] + [f'{name} px ({count})' for name, count in counts.items()],
+                        [[_label(method)] + [_number(item['recall_by_radius_px'][name], 2)
+                                             for name in counts]
+                         for method, item in sizes[native]['methods'].items()])
+    sweeps = detector.get('sweeps')
+    if sweeps:
+        lines += ['', f"### Time against max radius and edge count, {sweeps['size']} "
+                      f"({sweeps['frames']} frames, median ms)", '']
+        lines += _table(['max_radius_px', 'GL ms', 'numpy ms'],
+                        [[f"{row['max_radius_px']:g}", _number(row['gl_ms']),
+                          _number(row['numpy_ms'])] for row in sweeps['max_radius']])
+        lines.append('')
+        lines += _table(['gradient_threshold', 'edge pixels', 'GL ms', 'numpy ms'],
+                        [[f"{row['gradient_threshold']:g}", f"{row['edges']:.0f}",
+                          _number(row['gl_ms']), _number(row['numpy_ms'])]
+                         for row in sweeps['edge_count']])
+    return lines
+
+
+def classifier_lines(classifier: Mapping[str, Any]) -> list[str]:
+    """Classifier tables: ours against plain NCC, overall and by sign width."""
+    every = classifier['crop_every']
+    subset = 'all' if every == 1 else f'every {every}th'
+    lines = ['## Classifier', '',
+             f"GTSRB-dev, {classifier['crops']} crops ({subset} of labels.csv); both "
+             f"methods use the same rendered templates.", '']
+    lines += _table(['method', 'accuracy', 'ms per crop'], [
+        ['ours: kth-law MACE, PSR, trained bank', _number(classifier['classifier_accuracy'], 3),
+         _number(classifier['classifier_ms_per_crop'], 2)],
+        ['plain NCC (cv2.matchTemplate, 5 scales)',
+         _number(classifier['ncc_baseline_accuracy'], 3),
+         _number(classifier['ncc_baseline_ms_per_crop'], 2)]])
+    counts = classifier.get('count_by_size_px') or {}
+    if counts:
+        lines += ['', '### Accuracy by sign width', '']
+        lines += _table(['sign width px', 'crops', 'ours', 'plain NCC'], [
+            [name, str(count), _number(classifier['classifier_by_size_px'][name], 3),
+             _number(classifier['ncc_baseline_by_size_px'][name], 3)]
+            for name, count in counts.items()])
+    rendered = classifier.get('rendered_bank') or {}
+    lines += ['', '### Time per frame', '']
+    lines += _table(['bank', 'ms per 640x480 frame of 7 candidates', 'ms per candidate'], [
+        ['shipped bank', _number(classifier['ms_per_frame_7_candidates']),
+         _number(classifier['ms_per_candidate'], 2)],
+        ['renderings only (`bank_file: none`)',
+         _number(rendered.get('ms_per_frame_7_candidates')),
+         _number(rendered.get('ms_per_candidate'), 2)]])
+    lines += ['', f"{classifier['speed_frames']} frames timed; banks "
+                  f"{classifier['bank_mb']:.1f} MB, loaded or built in "
+                  f"{classifier['bank_load_or_build_s']:.1f} s."]
+    return lines
+
+
+def pipeline_lines(pipeline: Mapping[str, Any]) -> list[str]:
+    """The pipeline table: fps serial and overlapped, latency, stage medians."""
+    lines = ['## Pipeline', '',
+             f"`Pipeline` on {pipeline['frames']} frames of a synthetic drive at "
+             f"{pipeline['width']}x{pipeline['height']}, backend {pipeline['backend']}.", '']
+    lines += _table(['figure', 'value'], [
+        ['fps, one frame at a time', _number(pipeline['fps'])],
+        ['fps, detection overlapping recognition (the node\'s default)',
+         _number(pipeline.get('overlapped_fps'))],
+        ['latency p50 ms', _number(pipeline['latency_p50_ms'])],
+        ['latency p95 ms', _number(pipeline['latency_p95_ms'])],
+        *[[f'stage {name} p50 ms', _number(value)]
+          for name, value in pipeline['stage_p50_ms'].items()]])
+    return lines
+
+
+def node_lines(node: Mapping[str, Any]) -> list[str]:
+    """The node table: one row per publishing rate."""
+    lines = ['## Node through DDS', '',
+             f"The installed `speed_sign_detector` fed {node['width']}x{node['height']} "
+             f"frames over DDS (backend {node['backend']}).", '']
+    lines += _table(['published Hz', 'seconds', 'fps answered', 'unanswered',
+                     'latency p50 ms', 'latency p95 ms', 'RSS MiB'],
+                    [[f"{rate['publish_hz']:g}", f"{rate['seconds']:g}",
+                      _number(rate['output_fps']), f"{rate['dropped']} of {rate['published']}",
+                      _number(rate['latency_p50_ms']), _number(rate['latency_p95_ms']),
+                      _number(rate['rss_mb'], 0)] for rate in node['rates']])
+    return lines
+
+
+def paper_lines(papers: Mapping[str, Mapping[str, Any]]) -> list[str]:
+    """The papers' headline figures, quoted (not measured)."""
+    rows = []
+    for item in papers.values():
+        kind = 'detection' if 'detection_rate' in item else 'recognition'
+        rate = item.get('detection_rate', item.get('recognition_rate'))
+        rows.append([str(item['source']), f"{item['fps']:g} fps at {item['frame_size']}",
+                     f'{rate:.0%} {kind}', str(item['hardware']), str(item['note'])])
+    return ['## The papers (quoted, not measured here)', ''] + _table(
+        ['paper', 'speed', 'rate', 'hardware', 'what the rate counts'], rows,
+        right_aligned_from=5)
+
+
+def render_results_markdown(results: Mapping[str, Any]) -> str:
+    """RESULTS.md of one run: a note, the summary, then one section per benchmark.
+
+    Args:
+        results: what ``run_all.run_benchmark`` returns (or its results.json, loaded).
+
+    Returns:
+        Markdown text ending in a newline.
+    """
+    command = ' '.join(results.get('command') or ['python', 'bench/run_all.py'])
+    lines = ['# Benchmark results', '',
+             f'Generated by `make bench` from the run\'s `results.json` (`{command}`, '
+             f"{results.get('elapsed_s', 0):.0f} s); do not edit by hand. Accuracy and speed "
+             'of each stage against its peers, measured in one run on one host.', '']
+    if results.get('quick'):
+        lines += [SMOKE_NOTE, '']
+    lines += summary_lines(results)
+    sections = (('detector', 'Detector', detector_lines),
+                ('classifier', 'Classifier', classifier_lines),
+                ('pipeline', 'Pipeline', pipeline_lines),
+                ('node', 'Node through DDS', node_lines))
+    for key, title, render in sections:
+        lines.append('')
+        problem = _problem(results.get(key))
+        lines += [f'## {title}', '', f'{problem[0].upper()}{problem[1:]}.'] if problem \
+            else render(results[key])
+    papers = results.get('paper_figures_quoted_not_measured')
+    if papers:
+        lines += [''] + paper_lines(papers)
+    return '\n'.join(lines) + '\n'
+
+
+def write_results_markdown(results: Mapping[str, Any], path: Path) -> None:
+    """Write ``render_results_markdown(results)`` to ``path`` (folders created)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(render_results_markdown(results))
