@@ -4,10 +4,12 @@ several classifier worker processes, frames classified at the same time are stil
 tracked and reported in order."""
 from __future__ import annotations
 
+import ctypes
 import dataclasses
+import sys
 import threading
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 
 import cv2
 import numpy as np
@@ -147,40 +149,91 @@ def test_drain_waits_for_every_frame_and_submit_after_close_fails(
         stages.submit(approach[0], 10.0)
 
 
-def test_gl_detection_lets_other_threads_run(approach: list[np.ndarray]) -> None:
-    """The GL calls that wait for the driver release the GIL (what makes overlap work):
-    a Python thread keeps running while the detector's dispatches execute."""
+#: Longer than any test run: while it lasts, a thread waiting for the GIL never forces
+#: the holder to drop it, so another thread runs only when the holder releases the GIL.
+NO_FORCED_SWITCH_S = 3600.0
+
+
+class _ProgressCounter:
+    """A Python thread that counts steps, sleeping a little between them (which gives
+    the GIL back at once): it takes a step only when it can get the GIL."""
+
+    def __init__(self) -> None:
+        self.steps = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._count, name='progress-counter')
+
+    def _count(self) -> None:
+        while not self._stop.is_set():
+            self.steps += 1
+            self._stop.wait(0.0002)
+
+    def __enter__(self) -> _ProgressCounter:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self._stop.set()
+        self._thread.join()
+
+
+def _holding_the_gil(function: ctypes._CFuncPtr) -> ctypes._CFuncPtr:
+    """The same C function, called the way ctypes calls Python C API functions: with the
+    GIL held for the whole call (the control for the test below)."""
+    address = ctypes.cast(function, ctypes.c_void_p).value
+    return ctypes.PYFUNCTYPE(None, *function.argtypes)(address)
+
+
+def _steps_during_gl_calls(frames: list[np.ndarray], hold_gil: bool) -> tuple[int, int]:
+    """Detect ``frames`` with a progress counter running on another thread.
+
+    Returns:
+        (steps the counter took while one of the detector's GL calls was in flight,
+        number of those GL calls). Forced GIL switches are off for the run, so a step can
+        fall inside a call only when the call itself lets other threads run.
+    """
     with Detector(PipelineConfig().detector, backend='gl') as detector:
         calls = detector._gl._calls  # the GL calls that wait for llvmpipe's threads
-        inside = threading.Event()
-        original_dispatch = calls._dispatch
         steps_inside = 0
-        stop = threading.Event()
-
-        def dispatch(*groups: int) -> None:
-            inside.set()
-            try:
-                original_dispatch(*groups)
-            finally:
-                inside.clear()
-
-        def count_steps() -> None:
-            nonlocal steps_inside
-            while not stop.is_set():
-                if inside.is_set():
-                    steps_inside += 1
-
-        calls._dispatch = dispatch
-        counter = threading.Thread(target=count_steps)
-        counter.start()
+        calls_made = 0
+        switch_interval_s = sys.getswitchinterval()
+        sys.setswitchinterval(NO_FORCED_SWITCH_S)  # before the counter first waits
         try:
-            for gray in approach:
-                detector.detect(gray)
+            with _ProgressCounter() as counter:
+
+                def watched(function: ctypes._CFuncPtr) -> Callable[..., None]:
+                    def call(*arguments: int) -> None:
+                        nonlocal steps_inside, calls_made
+                        before = counter.steps
+                        function(*arguments)
+                        steps_inside += counter.steps - before
+                        calls_made += 1
+                    return call
+
+                for name in ('_use_program', '_dispatch', '_dispatch_indirect',
+                             '_bind_buffer', '_memory_barrier', 'finish'):
+                    function = getattr(calls, name)
+                    setattr(calls, name, watched(_holding_the_gil(function) if hold_gil
+                                                 else function))
+                for gray in frames:
+                    detector.detect(gray)
         finally:
-            stop.set()
-            counter.join()
-    # with the GIL held during a dispatch the counter could not take a single step then
-    assert steps_inside > 0
+            sys.setswitchinterval(switch_interval_s)
+    return steps_inside, calls_made
+
+
+def test_gl_detection_lets_other_threads_run(approach: list[np.ndarray]) -> None:
+    """The GL calls that wait for the driver release the GIL (what makes overlap work):
+    a Python thread takes steps while the detector's GL calls are in flight. The control
+    makes the same C calls holding the GIL, and the same count must then find no step
+    inside any call (so the check can tell the two apart)."""
+    steps_inside, calls_made = _steps_during_gl_calls(approach, hold_gil=False)
+    control_steps_inside, control_calls_made = _steps_during_gl_calls(approach,
+                                                                      hold_gil=True)
+    assert calls_made == control_calls_made > len(approach)
+    assert control_steps_inside == 0, 'the check cannot tell a call holding the GIL apart'
+    assert steps_inside > 0, (f'no other thread ran during any of {calls_made} GL calls: '
+                              'they hold the GIL')
 
 
 def test_several_classifier_workers_classify_at_once_and_report_in_order(
