@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 
 from speed_sign_detector.config import ClassifierConfig, ConfigError, from_parameters
+from speed_sign_detector.labelled_crops import LabelledCrop
 from speed_sign_detector.recognition.candidate_evidence import CorrelationEvidence
 from speed_sign_detector.recognition.classifier import Classifier
 from speed_sign_detector.recognition.crop_framing import auto_framings, crop_sign_radius
 from speed_sign_detector.recognition.crop_reading import crop_positions, framed_search_config
-from speed_sign_detector.recognition.labelled_crops import LabelledCrop
-from speed_sign_detector.recognition.training import locate_signs
+from speed_sign_detector.training.bank_training import locate_signs
 
 #: gtsrb-dev crops (class folder 00003 = 60 km/h, 00007 = 100 km/h) where the free search
 #: settles 8-9 px off the centre of a 56 px crop (on a filter that reads no class clearly)

@@ -12,8 +12,7 @@ import pytest
 
 from speed_sign_detector.errors import BankFileError
 from speed_sign_detector.recognition.bank_file import load_bank_file, save_bank_file
-from speed_sign_detector.recognition.opinion_network import fit_network_opinion
-from speed_sign_detector.recognition.second_opinion import SecondOpinion, fit_second_opinion
+from speed_sign_detector.recognition.second_opinion import SecondOpinion
 from speed_sign_detector.recognition.sign_features import PATCH_PX, sign_features
 from speed_sign_detector.recognition.templates import gray_template
 from speed_sign_detector.recognition.trained_bank import (
@@ -22,7 +21,8 @@ from speed_sign_detector.recognition.trained_bank import (
     load_trained_bank,
     save_trained_bank,
 )
-from speed_sign_detector.recognition.training import TrainingConfig
+from speed_sign_detector.training.bank_training import TrainingConfig
+from speed_sign_detector.training.opinion_fitting import fit_network_opinion, fit_second_opinion
 
 LABELS = ('30', '80', 'other_sign')
 

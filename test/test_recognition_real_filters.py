@@ -22,9 +22,8 @@ from speed_sign_detector.recognition.classifier import Classifier
 from speed_sign_detector.recognition.real_filters import (
     REAL_FILTER_FFT_PX,
     RealFilters,
-    _patch_spectra,
     fused_label_order,
-    train_real_filters,
+    patch_spectra,
 )
 from speed_sign_detector.recognition.second_opinion import SecondOpinion
 from speed_sign_detector.recognition.sign_features import FEATURE_SIZE, PATCH_PX
@@ -35,6 +34,7 @@ from speed_sign_detector.recognition.trained_bank import (
     load_trained_bank,
     save_trained_bank,
 )
+from speed_sign_detector.training.filter_fitting import train_real_filters
 
 #: Each label's strokes: (x0, y0, x1, y1) in patch pixels, inside the inner disc.
 STROKES = {'30': [(16, 14, 22, 34), (28, 14, 34, 34)],
@@ -79,7 +79,7 @@ def test_psr_equals_that_of_the_whole_correlation_plane(filters: RealFilters) ->
     rng = np.random.default_rng(4)
     patches = np.stack([patch_of(label, rng, (1, -2)) for label in STROKES]
                        + [rng.uniform(0, 255, (PATCH_PX, PATCH_PX)).astype(np.float32)])
-    spectra = _patch_spectra(patches, filters.inner_radius_px)
+    spectra = patch_spectra(patches, filters.inner_radius_px)
     planes = np.fft.irfft2(spectra[:, None] * filters.spectra[None],
                            s=(REAL_FILTER_FFT_PX, REAL_FILTER_FFT_PX))
     planes = np.fft.fftshift(planes, axes=(2, 3))  # zero shift at the centre

@@ -22,7 +22,17 @@ from test_recognition_training import (
 )
 
 from speed_sign_detector.errors import TrainingDataError
-from speed_sign_detector.recognition.scene_examples import (
+from speed_sign_detector.recognition.sign_features import FEATURE_SIZE
+from speed_sign_detector.recognition.trained_bank import TrainedBank, load_trained_bank
+from speed_sign_detector.scene_truth import SceneSign
+from speed_sign_detector.training.bank_training import (
+    _rendered_classifier,
+    locate_signs,
+    read_crops,
+    train_bank,
+    train_from_located,
+)
+from speed_sign_detector.training.scene_examples import (
     SCENE_BACKGROUND_LABEL,
     SceneExamples,
     detect_scenes,
@@ -30,17 +40,7 @@ from speed_sign_detector.recognition.scene_examples import (
     scene_folds,
     scene_label,
 )
-from speed_sign_detector.recognition.scene_validation import cross_validate_scenes
-from speed_sign_detector.recognition.sign_features import FEATURE_SIZE
-from speed_sign_detector.recognition.trained_bank import TrainedBank, load_trained_bank
-from speed_sign_detector.recognition.training import (
-    _rendered_classifier,
-    locate_signs,
-    read_crops,
-    train_bank,
-    train_from_located,
-)
-from speed_sign_detector.scene_truth import SceneSign
+from speed_sign_detector.training.scene_validation import cross_validate_scenes
 
 WIDTH, HEIGHT = 480, 320
 #: (file, [(kind, GTSDB class, diameter px, centre x, centre y)]); classes as in GTSRB:

@@ -20,6 +20,7 @@ from scene_helpers import textured_background
 from speed_sign_detector.config import ClassifierConfig
 from speed_sign_detector.detection.candidates import Candidate
 from speed_sign_detector.errors import BankFileError, TrainingDataError
+from speed_sign_detector.labelled_crops import read_crop_folder, track_folds
 from speed_sign_detector.recognition.bank_file import load_bank_file, save_bank_file
 from speed_sign_detector.recognition.classifier import (
     LABEL_END_OF_LIMIT,
@@ -32,7 +33,6 @@ from speed_sign_detector.recognition.crop_framing import (
     padded_fallback_radius,
 )
 from speed_sign_detector.recognition.filter_banks import bank_radii, build_banks
-from speed_sign_detector.recognition.labelled_crops import read_crop_folder, track_folds
 from speed_sign_detector.recognition.second_opinion import (
     END_OF_LIMIT_LABEL,
     RENDERED_ONLY_MIN_SCORE,
@@ -47,7 +47,7 @@ from speed_sign_detector.recognition.trained_bank import (
     load_trained_bank,
     save_trained_bank,
 )
-from speed_sign_detector.recognition.training import (
+from speed_sign_detector.training.bank_training import (
     TrainingConfig,
     cross_validate,
     rendered_training_crops,

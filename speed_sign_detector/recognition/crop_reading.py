@@ -40,7 +40,8 @@ one they read 1.1 % of the look-alikes as a limit instead of 0.5 %.
 from __future__ import annotations
 
 import dataclasses
-from typing import TYPE_CHECKING
+from collections.abc import Sequence
+from typing import Protocol
 
 import numpy as np
 
@@ -53,10 +54,33 @@ from speed_sign_detector.recognition.crop_framing import (
     padded_fallback_radius,
 )
 
-if TYPE_CHECKING:
-    from speed_sign_detector.recognition.classifier import Classifier
+__all__ = ['CropReader', 'clearest', 'crop_positions', 'decide_crop', 'framed_search_config']
 
-__all__ = ['clearest', 'crop_positions', 'decide_crop', 'framed_search_config']
+
+class CropReader(Protocol):
+    """What reading a crop needs of the classifier (:class:`~.classifier.Classifier` is
+    one). Stated here so that this module does not import the classifier, which imports
+    this module."""
+
+    config: ClassifierConfig
+
+    @property
+    def crop_detection_gate(self) -> float:
+        """The least detection PSR at which a crop's classification filters run."""
+
+    def evidence_for_candidates(self, gray: np.ndarray,
+                                positions: Sequence[tuple[float, float, float]],
+                                detection_psr_threshold: float | None = None,
+                                held_to_framing: bool = False
+                                ) -> list[CorrelationEvidence | Classification]:
+        """Evidence for (x, y, radius) positions, pixels, of a (H, W) uint8 image."""
+
+    def decide(self, gray: np.ndarray, evidence: CorrelationEvidence | Classification,
+               use_second_opinion: bool = True, crop: bool = False) -> Classification:
+        """The answer for one sign's evidence."""
+
+    def second_look_stands(self, answer: Classification) -> bool:
+        """True when a second look's answer replaces "no sign"."""
 
 
 def crop_positions(shape: tuple[int, ...], framing: str, min_radius_px: float
@@ -85,7 +109,7 @@ def clearest(found: list[CorrelationEvidence | Classification]
                if isinstance(item, CorrelationEvidence) else -np.inf)
 
 
-def decide_crop(classifier: Classifier, crop: np.ndarray,
+def decide_crop(classifier: CropReader, crop: np.ndarray,
                 evidence: CorrelationEvidence | Classification, framing: str,
                 use_second_opinion: bool = True) -> Classification:
     """The answer for a checked crop from its evidence, with the second looks of the
@@ -122,7 +146,7 @@ def decide_crop(classifier: Classifier, crop: np.ndarray,
     return answer
 
 
-def _read(classifier: Classifier, crop: np.ndarray,
+def _read(classifier: CropReader, crop: np.ndarray,
           evidence: CorrelationEvidence | Classification,
           use_second_opinion: bool) -> Classification:
     """One look's answer (:meth:`~.classifier.Classifier.decide` for a crop), or "no sign"

@@ -6,7 +6,7 @@ rotation, seeing only the sign's inner field). Every filter is a kth-law MACE co
 (optimal trade-off with noise) of the out-of-plane views of its templates (yaw 0, +-10,
 +-20, +-30 deg x pitch 0, +-10 deg), synthesized from the package's renderings
 (:mod:`.templates`, :mod:`.mace`) and, when a trained bank file supplies them, from
-real examples (:mod:`.training`). Built banks are cached on disk, keyed by every
+real examples (:mod:`.bank_training`). Built banks are cached on disk, keyed by every
 parameter that shapes them.
 """
 from __future__ import annotations
@@ -187,7 +187,7 @@ def build_size_bank(radius_px: float, config: ClassifierConfig,
         config: classifier configuration.
         masters: high-resolution renderings by kind (:func:`.templates.render_master`).
         class_examples: class name -> (M, P, P) canonical real examples (mean images of
-            labelled crops, :mod:`.training`) that join the renderings in that class's
+            labelled crops, :mod:`.bank_training`) that join the renderings in that class's
             classification filters.
     """
     class_examples = class_examples or {}

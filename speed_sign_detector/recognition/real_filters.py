@@ -6,7 +6,8 @@ the training crops themselves: each located sign resampled to the canonical patc
 :mod:`.sign_features` (its disc fills 48x48 pixels), its inner field (where the digits
 are, a disc of ``inner_radius_px``) normalised to zero mean and unit energy, and each
 label's examples (the real crops, their degraded copies, and renderings of the values
-with no real examples) combined into one optimal trade-off (OT-MACH) filter::
+with no real examples) combined into one optimal trade-off (OT-MACH) filter
+(:mod:`speed_sign_detector.training.filter_fitting` builds them)::
 
     H(u, v) = M(u, v) / (D(u, v) + S(u, v) + noise * mean(D))
 
@@ -34,7 +35,7 @@ import numpy as np
 from speed_sign_detector.recognition.classification import label_of_class
 from speed_sign_detector.recognition.sign_features import PATCH_PX
 
-__all__ = ['REAL_FILTER_FFT_PX', 'RealFilters', 'fused_label_order', 'train_real_filters']
+__all__ = ['REAL_FILTER_FFT_PX', 'RealFilters', 'fused_label_order', 'patch_spectra']
 
 #: Side of the correlation plane, pixels (the 48-pixel patch zero-padded).
 REAL_FILTER_FFT_PX = 64
@@ -93,7 +94,7 @@ class RealFilters:
             ``PEAK_REACH_PX`` of the centre, less the plane's mean, over its standard
             deviation.
         """
-        spectra = _patch_spectra(np.asarray(patches, np.float32), self.inner_radius_px)
+        spectra = patch_spectra(np.asarray(patches, np.float32), self.inner_radius_px)
         products = spectra[:, None] * self.spectra[None]  # (N, L, 64, 33)
         # no correlation plane is formed: its mean is the product's zero frequency, its energy
         # the product's (Parseval; rfft2 holds the columns 1-31 for two), and its values
@@ -104,41 +105,6 @@ class RealFilters:
         spread = np.sqrt(np.maximum(energy / area - mean ** 2, 0.0)) + 1e-9
         peaks = (_ROW_SHIFTS @ products @ _COLUMN_SHIFTS).real.max(axis=(2, 3)) / area
         return ((peaks - mean) / spread).astype(np.float32)
-
-
-def train_real_filters(patches: np.ndarray, labels: Sequence[str], noise: float = 10.0,
-                       inner_radius_px: float = 16.0, weight: float = 0.25) -> RealFilters:
-    """One OT-MACH filter per label from its examples' canonical patches.
-
-    Args:
-        patches: (N, 48, 48) canonical patches of located signs.
-        labels: (N,) their labels.
-        noise: weight of white noise in the trade-off, relative to the mean power
-            (larger: closer to the plain mean of the examples, more tolerant).
-        inner_radius_px: radius of the disc of the patch the filters see, pixels.
-        weight: see :class:`RealFilters`.
-
-    Raises:
-        ValueError: when ``patches`` and ``labels`` differ in length or are empty.
-    """
-    labels = list(labels)
-    if len(labels) != len(patches) or not labels:
-        raise ValueError(f'need as many labels as patches (at least one), got '
-                         f'{len(labels)} labels for {len(patches)} patches')
-    if noise < 0.0:
-        raise ValueError(f'noise must be >= 0, got {noise}')
-    names = tuple(sorted(set(labels)))
-    label_array = np.asarray(labels)
-    filters = np.empty((len(names), REAL_FILTER_FFT_PX, REAL_FILTER_FFT_PX // 2 + 1),
-                       np.complex64)
-    for index, name in enumerate(names):  # one label's spectra at a time (memory)
-        examples = _patch_spectra(np.asarray(patches[label_array == name], np.float32),
-                                  inner_radius_px)
-        mean = examples.mean(axis=0)
-        power = (np.abs(examples) ** 2).mean(axis=0)
-        similarity = (np.abs(examples - mean) ** 2).mean(axis=0)
-        filters[index] = np.conj(mean / (power + similarity + noise * power.mean()))
-    return RealFilters(names, filters, float(inner_radius_px), float(weight))
 
 
 def fused_label_order(ranked: Sequence[tuple[str, float]], filters: RealFilters,
@@ -178,7 +144,7 @@ def _inner_disc(inner_radius_px: float) -> np.ndarray:
     return disc
 
 
-def _patch_spectra(patches: np.ndarray, inner_radius_px: float) -> np.ndarray:
+def patch_spectra(patches: np.ndarray, inner_radius_px: float) -> np.ndarray:
     """(N, 64, 33) complex spectra of the patches' inner discs, each at zero mean and
     unit energy inside the disc."""
     disc = _inner_disc(float(inner_radius_px))

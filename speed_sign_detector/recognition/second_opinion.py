@@ -15,9 +15,11 @@ The model takes standardised :mod:`.sign_features` and has one of two forms, bot
 scores from about -1 to +1 per class, comparable across classes:
 
 - linear: ridge regression onto +-1 class indicators (one-vs-rest), solved in closed
-  form with numpy (:func:`fit_second_opinion`);
+  form with numpy;
 - network: an ensemble of small one-hidden-layer networks whose score of a class is the
-  mean of ``2 p - 1`` over its members (:mod:`.opinion_network` trains it).
+  mean of ``2 p - 1`` over its members.
+
+Bank building fits both forms (:mod:`speed_sign_detector.training.opinion_fitting`).
 """
 from __future__ import annotations
 
@@ -26,8 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ['NETWORK_RENDERED_ONLY_MIN_SCORE', 'RENDERED_ONLY_MIN_SCORE', 'SecondOpinion',
-           'fit_second_opinion', 'ordered_labels']
+__all__ = ['NETWORK_RENDERED_ONLY_MIN_SCORE', 'RENDERED_ONLY_MIN_SCORE', 'SecondOpinion']
 
 #: The label of end-of-limit signs (as :data:`.classifier.LABEL_END_OF_LIMIT`).
 END_OF_LIMIT_LABEL = 'end_of_limit'
@@ -150,60 +151,3 @@ class SecondOpinion:
             # correlation read, but does not turn a limit the correlation read into one
             return None
         return model_best
-
-
-def fit_second_opinion(features: np.ndarray, labels: Sequence[str], ridge: float,
-                       weights: np.ndarray | None = None,
-                       real_labels: Sequence[str] | None = None) -> SecondOpinion:
-    """Fit the model in closed form.
-
-    Args:
-        features: (N, D) float feature vectors.
-        labels: (N,) label of each.
-        ridge: Tikhonov regularisation (> 0) on the standardised features.
-        weights: optional (N,) sample weights (for example to balance classes).
-        real_labels: the labels with real examples (default: every label).
-
-    Returns:
-        The fitted :class:`SecondOpinion`.
-    """
-    features = np.asarray(features, np.float32)
-    if features.ndim != 2 or len(features) != len(labels) or len(features) == 0:
-        raise ValueError(f'features must be (N, D) with one label per row, got '
-                         f'{features.shape} for {len(labels)} labels')
-    if ridge <= 0:
-        raise ValueError(f'ridge must be > 0, got {ridge}')
-    names = ordered_labels(labels)
-    if len(names) < 2:
-        raise ValueError(f'need examples of at least two labels, got {names}')
-    index = np.asarray([names.index(label) for label in labels])
-    sample = np.ones(len(features), np.float64) if weights is None else \
-        np.asarray(weights, np.float64)
-    mean = features.mean(axis=0)
-    scale = features.std(axis=0) + np.float32(1e-3)
-    standardised = ((features - mean) / scale).astype(np.float64)
-    targets = -np.ones((len(features), len(names)))
-    targets[np.arange(len(features)), index] = 1.0
-    # weighted ridge with an unpenalised bias: centre by the weighted means
-    total = sample.sum()
-    x_mean = (sample[:, None] * standardised).sum(axis=0) / total
-    y_mean = (sample[:, None] * targets).sum(axis=0) / total
-    centred_x = (standardised - x_mean) * np.sqrt(sample)[:, None]
-    centred_y = (targets - y_mean) * np.sqrt(sample)[:, None]
-    count, dimension = centred_x.shape
-    if dimension > count:  # dual form: N x N
-        gram = centred_x @ centred_x.T
-        solution = centred_x.T @ np.linalg.solve(gram + ridge * np.eye(count), centred_y)
-    else:
-        gram = centred_x.T @ centred_x
-        solution = np.linalg.solve(gram + ridge * np.eye(dimension), centred_x.T @ centred_y)
-    bias = y_mean - x_mean @ solution
-    real = tuple(name for name in names if real_labels is None or name in real_labels)
-    return SecondOpinion(names, mean.astype(np.float32), scale.astype(np.float32),
-                         solution.astype(np.float32), bias.astype(np.float32), real)
-
-
-def ordered_labels(labels: Sequence[str]) -> tuple[str, ...]:
-    """The distinct labels in the models' order: limits by value, then the others by name."""
-    return tuple(sorted(set(labels), key=lambda name: (
-        not name.isdigit(), int(name) if name.isdigit() else 0, name)))

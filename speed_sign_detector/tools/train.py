@@ -31,7 +31,9 @@ from speed_sign_detector import __version__
 from speed_sign_detector.config import ClassifierConfig, DetectorConfig, PipelineConfig, load_yaml
 from speed_sign_detector.errors import SpeedSignError
 from speed_sign_detector.recognition.trained_bank import save_trained_bank
-from speed_sign_detector.recognition.training import (
+from speed_sign_detector.tools.progress import progress_bar
+from speed_sign_detector.tools.run_control import run_subcommand
+from speed_sign_detector.training.bank_training import (
     MIN_LEAD_OF_MODEL,
     SECOND_OPINION_MODELS,
     VARIANTS,
@@ -39,8 +41,6 @@ from speed_sign_detector.recognition.training import (
     cross_validate,
     train_bank,
 )
-from speed_sign_detector.tools.progress import progress_bar
-from speed_sign_detector.tools.run_control import run_subcommand
 
 _DEFAULTS = TrainingConfig()
 #: Column titles of :func:`cross_validate`'s variants.

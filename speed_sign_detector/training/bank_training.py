@@ -13,7 +13,7 @@ Training (:func:`train_bank`):
    filters at every size, :mod:`.filter_banks`; measured worse, off by default.)
 3. Second opinion: a model on gradient-orientation and pixel features
    (:mod:`.second_opinion`), by default an ensemble of small networks
-   (:mod:`.opinion_network`), or a ridge model (``model='linear'``), trained on the
+   (:mod:`.opinion_fitting`), or a ridge model (``model='linear'``), trained on the
    patches and on degraded copies of each crop (blur, JPEG, contrast loss,
    down-scaling), so that small, blurred and dim signs are seen in training.
 
@@ -41,33 +41,21 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 
 from speed_sign_detector import __version__
 from speed_sign_detector.config import ClassifierConfig, DetectorConfig
 from speed_sign_detector.errors import TrainingDataError
+from speed_sign_detector.labelled_crops import (
+    LabelledCrop,
+    read_crop_folder,
+    track_folds,
+)
 from speed_sign_detector.recognition.classifier import (
     Classification,
     Classifier,
     CorrelationEvidence,
 )
-from speed_sign_detector.recognition.degradation import degraded, jittered
-from speed_sign_detector.recognition.labelled_crops import (
-    LabelledCrop,
-    read_crop_folder,
-    track_folds,
-)
-from speed_sign_detector.recognition.opinion_network import fit_network_opinion
-from speed_sign_detector.recognition.real_filters import train_real_filters
-from speed_sign_detector.recognition.scene_examples import (
-    DetectedScene,
-    SceneExamples,
-    detect_scenes,
-    read_scene_examples,
-)
-from speed_sign_detector.recognition.scene_validation import cross_validate_scenes
-from speed_sign_detector.recognition.second_opinion import fit_second_opinion
 from speed_sign_detector.recognition.sign_features import aligned_patches, sign_features
 from speed_sign_detector.recognition.templates import (
     ARCHED_SIX_GEOMETRY,
@@ -79,6 +67,17 @@ from speed_sign_detector.recognition.templates import (
     gray_template,
 )
 from speed_sign_detector.recognition.trained_bank import NO_BANK_FILE, TrainedBank
+from speed_sign_detector.tools.image_files import UnreadableImageError, read_gray_image
+from speed_sign_detector.training.degradation import degraded, jittered
+from speed_sign_detector.training.filter_fitting import train_real_filters
+from speed_sign_detector.training.opinion_fitting import fit_network_opinion, fit_second_opinion
+from speed_sign_detector.training.scene_examples import (
+    DetectedScene,
+    SceneExamples,
+    detect_scenes,
+    read_scene_examples,
+)
+from speed_sign_detector.training.scene_validation import cross_validate_scenes
 
 __all__ = ['MIN_LEAD_OF_MODEL', 'SECOND_OPINION_MODELS', 'LocatedCrops', 'TrainingConfig',
            'cross_validate', 'locate_signs', 'rendered_training_crops', 'train_bank',
@@ -102,7 +101,7 @@ class TrainingConfig:
 
     Attributes:
         model: the second opinion's form: ``'network'`` (an ensemble of small networks,
-            :mod:`.opinion_network`) or ``'linear'`` (ridge regression).
+            :mod:`.opinion_fitting`) or ``'linear'`` (ridge regression).
         ridge: Tikhonov regularisation of the linear second opinion (standardised
             features).
         hidden_units: hidden units of each network of the ensemble.
@@ -189,13 +188,6 @@ class LocatedCrops:
                             tuple(self.evidence[i] for i in indices))
 
 
-def _read_gray(crop: LabelledCrop) -> np.ndarray:
-    image = cv2.imread(str(crop.path), cv2.IMREAD_GRAYSCALE)
-    if image is None or image.size == 0:
-        raise TrainingDataError(f'{crop.path}: missing or not a readable image')
-    return image
-
-
 def read_crops(folders: Sequence[Path]) -> tuple[list[LabelledCrop], list[np.ndarray],
                                                  list[str]]:
     """Every crop of ``folders`` (labels.csv format) with its gray image.
@@ -212,11 +204,11 @@ def read_crops(folders: Sequence[Path]) -> tuple[list[LabelledCrop], list[np.nda
     unreadable: list[str] = []
     for folder in folders:
         for crop in read_crop_folder(Path(folder)):
-            try:
-                images.append(_read_gray(crop))
+            try:  # decoded from the bytes, as the evaluation tools do: no OpenCV warning
+                images.append(read_gray_image(crop.path))
                 crops.append(crop)
-            except TrainingDataError as err:
-                unreadable.append(str(err))
+            except UnreadableImageError as err:
+                unreadable.append(f'{crop.path}: {err}')
     if not crops:
         raise TrainingDataError(f'no readable crop in {", ".join(str(f) for f in folders)}')
     return crops, images, unreadable

@@ -1,13 +1,17 @@
-"""Training the second opinion as a small neural network, with numpy alone.
+"""Fitting the second opinion, with numpy alone: a ridge model in closed form
+(:func:`fit_second_opinion`) or an ensemble of small neural networks
+(:func:`fit_network_opinion`).
 
 The network is an ensemble of ``members`` one-hidden-layer perceptrons over the
-standardised :mod:`.sign_features`: ``softmax(relu(x W1 + b1) W2 + b2)``, trained with
-softmax cross-entropy (class-balanced sample weights), Adam and a cosine learning-rate
-schedule, each member from its own random start and sample order. The ensemble's score
-of a class is the mean of ``2 p - 1`` over its members (``p``: that member's probability
-of the class), so scores run from -1 to +1 as the linear model's do and
-:meth:`~.second_opinion.SecondOpinion.choose` reads both the same way; averaging
-members makes the probabilities less overconfident than any one member's.
+standardised sign features (:mod:`~speed_sign_detector.recognition.sign_features`):
+``softmax(relu(x W1 + b1) W2 + b2)``, trained with softmax cross-entropy (class-balanced
+sample weights), Adam and a cosine learning-rate schedule, each member from its own random
+start and sample order. The ensemble's score of a class is the mean of ``2 p - 1`` over
+its members (``p``: that member's probability of the class), so scores run from -1 to +1
+as the linear model's do and
+:meth:`~speed_sign_detector.recognition.second_opinion.SecondOpinion.choose` reads both
+the same way; averaging members makes the probabilities less overconfident than any one
+member's.
 
 Measured on gtsrb-dev, 5 folds split by track (see the README's training section): the
 same features and decision rule read 0.939 of the limit crops with the ridge model, 0.950
@@ -21,9 +25,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from speed_sign_detector.recognition.second_opinion import SecondOpinion, ordered_labels
+from speed_sign_detector.recognition.second_opinion import SecondOpinion
 
-__all__ = ['fit_network_opinion']
+__all__ = ['fit_network_opinion', 'fit_second_opinion', 'ordered_labels']
 
 
 def fit_network_opinion(features: np.ndarray, labels: Sequence[str], hidden_units: int = 256,
@@ -52,7 +56,8 @@ def fit_network_opinion(features: np.ndarray, labels: Sequence[str], hidden_unit
             steps and stay untrained).
 
     Returns:
-        The trained :class:`~.second_opinion.SecondOpinion` (network form).
+        The trained :class:`~speed_sign_detector.recognition.second_opinion.SecondOpinion`
+        (network form).
 
     Raises:
         ValueError: for features and labels that do not fit, fewer than two labels, or
@@ -144,3 +149,60 @@ def _gradients(params: list[np.ndarray], inputs: np.ndarray, index: np.ndarray,
     back = delta @ weights.T
     back[pre <= 0.0] = 0.0
     return [inputs.T @ back, back.sum(axis=0), hidden.T @ delta, delta.sum(axis=0)]
+
+
+def fit_second_opinion(features: np.ndarray, labels: Sequence[str], ridge: float,
+                       weights: np.ndarray | None = None,
+                       real_labels: Sequence[str] | None = None) -> SecondOpinion:
+    """Fit the model in closed form.
+
+    Args:
+        features: (N, D) float feature vectors.
+        labels: (N,) label of each.
+        ridge: Tikhonov regularisation (> 0) on the standardised features.
+        weights: optional (N,) sample weights (for example to balance classes).
+        real_labels: the labels with real examples (default: every label).
+
+    Returns:
+        The fitted :class:`SecondOpinion`.
+    """
+    features = np.asarray(features, np.float32)
+    if features.ndim != 2 or len(features) != len(labels) or len(features) == 0:
+        raise ValueError(f'features must be (N, D) with one label per row, got '
+                         f'{features.shape} for {len(labels)} labels')
+    if ridge <= 0:
+        raise ValueError(f'ridge must be > 0, got {ridge}')
+    names = ordered_labels(labels)
+    if len(names) < 2:
+        raise ValueError(f'need examples of at least two labels, got {names}')
+    index = np.asarray([names.index(label) for label in labels])
+    sample = np.ones(len(features), np.float64) if weights is None else \
+        np.asarray(weights, np.float64)
+    mean = features.mean(axis=0)
+    scale = features.std(axis=0) + np.float32(1e-3)
+    standardised = ((features - mean) / scale).astype(np.float64)
+    targets = -np.ones((len(features), len(names)))
+    targets[np.arange(len(features)), index] = 1.0
+    # weighted ridge with an unpenalised bias: centre by the weighted means
+    total = sample.sum()
+    x_mean = (sample[:, None] * standardised).sum(axis=0) / total
+    y_mean = (sample[:, None] * targets).sum(axis=0) / total
+    centred_x = (standardised - x_mean) * np.sqrt(sample)[:, None]
+    centred_y = (targets - y_mean) * np.sqrt(sample)[:, None]
+    count, dimension = centred_x.shape
+    if dimension > count:  # dual form: N x N
+        gram = centred_x @ centred_x.T
+        solution = centred_x.T @ np.linalg.solve(gram + ridge * np.eye(count), centred_y)
+    else:
+        gram = centred_x.T @ centred_x
+        solution = np.linalg.solve(gram + ridge * np.eye(dimension), centred_x.T @ centred_y)
+    bias = y_mean - x_mean @ solution
+    real = tuple(name for name in names if real_labels is None or name in real_labels)
+    return SecondOpinion(names, mean.astype(np.float32), scale.astype(np.float32),
+                         solution.astype(np.float32), bias.astype(np.float32), real)
+
+
+def ordered_labels(labels: Sequence[str]) -> tuple[str, ...]:
+    """The distinct labels in the models' order: limits by value, then the others by name."""
+    return tuple(sorted(set(labels), key=lambda name: (
+        not name.isdigit(), int(name) if name.isdigit() else 0, name)))

@@ -10,7 +10,7 @@ a real road that is *not* a sign (wheels, windows, foliage, lamps), nor how a si
    (the candidate radius times ``candidate_radius_scale``, and for large candidates
    also the larger-size retry's; :func:`classification_positions`);
 3. every located sign becomes an example: the label of the annotated sign it lies on
-   (:data:`~speed_sign_detector.recognition.labelled_crops.GTSRB_CLASS_NAMES`, other
+   (:data:`~speed_sign_detector.labelled_crops.GTSRB_CLASS_NAMES`, other
    annotated classes ``'other_sign'``), or :data:`SCENE_BACKGROUND_LABEL` where it lies
    on none. A located size far from the annotated one is left out (neither sign nor
    background). Degraded, jittered copies follow each example, as for crops.
@@ -30,22 +30,22 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from speed_sign_detector.config import DetectorConfig
 from speed_sign_detector.detection.candidates import Candidate
 from speed_sign_detector.detection.detector import Detector
 from speed_sign_detector.errors import InvalidFrameError, TrainingDataError, TruthFileError
+from speed_sign_detector.labelled_crops import GTSRB_CLASS_NAMES
 from speed_sign_detector.recognition.classifier import Classifier, CorrelationEvidence
-from speed_sign_detector.recognition.degradation import degraded, jittered
-from speed_sign_detector.recognition.labelled_crops import GTSRB_CLASS_NAMES
 from speed_sign_detector.recognition.sign_features import (
     FEATURE_SIZE,
     aligned_patches,
     sign_features,
 )
 from speed_sign_detector.scene_truth import SceneSign, read_gtsdb_truth, scene_image_files
+from speed_sign_detector.tools.image_files import UnreadableImageError, read_gray_image
+from speed_sign_detector.training.degradation import degraded, jittered
 
 __all__ = ['MAX_RADIUS_ERROR', 'SCENE_BACKGROUND_LABEL', 'DetectedScene', 'SceneExamples',
            'classification_positions', 'detect_scenes', 'read_scene_examples',
@@ -183,9 +183,12 @@ class DetectedScene:
 
 
 def read_scene_gray(path: Path) -> np.ndarray | None:
-    """The (H, W) uint8 gray image, or ``None`` where it cannot be read."""
-    gray = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-    return None if gray is None or gray.size == 0 else gray
+    """The (H, W) uint8 gray image, or ``None`` where it cannot be read (decoded from the
+    file's bytes, as the evaluation tools do: OpenCV prints no warning of its own)."""
+    try:
+        return read_gray_image(path)
+    except UnreadableImageError:
+        return None
 
 
 def detect_scenes(folders: Sequence[Path],

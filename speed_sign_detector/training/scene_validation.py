@@ -16,14 +16,14 @@ from typing import Any
 from speed_sign_detector.config import ClassifierConfig
 from speed_sign_detector.errors import TrainingDataError
 from speed_sign_detector.recognition.classifier import Classifier
-from speed_sign_detector.recognition.scene_examples import (
+from speed_sign_detector.recognition.trained_bank import TrainedBank
+from speed_sign_detector.scene_truth import count_false_limits, is_recognized
+from speed_sign_detector.training.scene_examples import (
     DetectedScene,
     SceneExamples,
     read_scene_gray,
     scene_folds,
 )
-from speed_sign_detector.recognition.trained_bank import TrainedBank
-from speed_sign_detector.scene_truth import count_false_limits, is_recognized
 
 __all__ = ['cross_validate_scenes']
 
