@@ -216,12 +216,20 @@ def _sign_image(kind: str, diameter_px: int) -> tuple[np.ndarray, np.ndarray]:
     return bgr.astype(np.float32), alpha.astype(np.float32)
 
 
+#: Kinds the renderer draws that the drives leave out, so that a drive of a given seed stays
+#: the drive its published figures were measured on (140 km/h came later; the rendered
+#: designs' bench, bench/bench_sign_designs.py, reads it).
+DRIVE_EXCLUDED_KINDS: frozenset[str] = frozenset({'140', 'end_of_limit_140'})
+
+
 def sign_kinds() -> tuple[tuple[str, ...], tuple[str, ...]]:
-    """(speed-limit kinds, look-alike kinds) that the sign renderer can draw."""
+    """(speed-limit kinds, look-alike kinds) that the drives place: those the sign
+    renderer can draw but :data:`DRIVE_EXCLUDED_KINDS`."""
     from speed_sign_detector.recognition.templates import SIGN_KINDS
 
-    limits = tuple(kind for kind in SIGN_KINDS if kind.isdigit() and int(kind) > 0)
-    lookalikes = tuple(kind for kind in SIGN_KINDS if not kind.isdigit())
+    kinds = [kind for kind in SIGN_KINDS if kind not in DRIVE_EXCLUDED_KINDS]
+    limits = tuple(kind for kind in kinds if kind.isdigit() and int(kind) > 0)
+    lookalikes = tuple(kind for kind in kinds if not kind.isdigit())
     return limits, lookalikes
 
 

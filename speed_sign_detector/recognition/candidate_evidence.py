@@ -30,6 +30,7 @@ from speed_sign_detector.recognition.correlation import (
     scene_spectra,
 )
 from speed_sign_detector.recognition.filter_banks import SizeBank
+from speed_sign_detector.recognition.sign_polarity import is_lit_on_dark
 
 
 @dataclass(frozen=True)
@@ -43,6 +44,9 @@ class CorrelationEvidence:
         radius_px: the sign's radius (that filter's size), frame pixels.
         rotation_deg: in-plane rotation of that filter, degrees counter-clockwise.
         detection_psr: PSR of the best detection filter (dimensionless).
+        inverted: the sign looked lit on a dark face (an electronic sign,
+            :func:`.sign_polarity.is_lit_on_dark`) and was correlated inverted; whatever
+            reads it further (the second opinion) must read ``255 - image`` too.
     """
 
     ranked: tuple[tuple[str, float], ...]
@@ -51,6 +55,7 @@ class CorrelationEvidence:
     radius_px: float
     rotation_deg: float
     detection_psr: float
+    inverted: bool = False
 
 
 @dataclass(frozen=True)
@@ -83,6 +88,7 @@ class _Position:
     largest: int  # ROI side, pixels (largest FFT size of those banks)
     raw: np.ndarray  # (largest, largest) uint8 ROI
     enhanced: np.ndarray  # the same after CLAHE (or ``raw``)
+    inverted: bool  # the ROI is the image inverted (a sign lit on a dark face)
     # by bank index: (best detection PSR of the size, peak row, peak column); the peak in
     # plane pixels, unwrapped around the expected peak (it may lie before index 0)
     detections: dict[int, tuple[float, int, int]] = field(default_factory=dict)
@@ -175,9 +181,14 @@ class EvidenceSearch:
             return NoSignFound()
         largest = max(self.banks[i].fft_size for i in indices)
         raw, scale = _roi(gray, x_px, y_px, largest, scale)
+        # an electronic sign (lit on a dark face) is read inverted: the polarity of the
+        # painted templates (the test on the ROI, centred on the position)
+        inverted = is_lit_on_dark(raw, largest / 2.0, largest / 2.0, radius_px * scale)
+        if inverted:
+            raw = 255 - raw
         enhanced = self._clahe.apply(raw) if self._clahe is not None else raw
         return _Position(x_px, y_px, radius_px, scale, radius_scaled, indices, largest, raw,
-                         enhanced)
+                         enhanced, inverted)
 
     def _detect(self, positions: Sequence[_Position]) -> None:
         """Every position's best detection filter (size) and its peak; sets
@@ -354,7 +365,8 @@ class EvidenceSearch:
         half = position.largest / 2.0
         return CorrelationEvidence(ranked, position.x_px + (roi_x - half) / scale,
                                    position.y_px + (roi_y - half) / scale,
-                                   size_radius / scale, roll, position.detection_psr)
+                                   size_radius / scale, roll, position.detection_psr,
+                                   position.inverted)
 
     def _lobes(self, radius_px: float) -> tuple[int, int]:
         """PSR window half sizes (sidelobe square, excluded centre) for a sign radius."""

@@ -8,7 +8,9 @@ Method (DAGM 2010, section 4), per candidate:
    smallest filters) is contrast-enhanced with CLAHE (optional) and correlated in the
    frequency domain with the detection filters (generic "00" and "100" signs) of the
    sizes near the candidate radius: the filter with the largest peak-to-sidelobe ratio
-   (PSR) gives the sign's size and centre.
+   (PSR) gives the sign's size and centre. A sign lit on a dark face (an electronic
+   sign, :mod:`.sign_polarity`) is read inverted, in the painted templates' polarity,
+   and so is its patch for the second opinion.
 2. The classification filters of that size and its neighbours decide the value by the
    largest PSR. They see only the sign's inner field (the digits): the scene is masked
    with a disc at the detected centre and the templates with the same disc, because
@@ -209,9 +211,14 @@ class Classifier:
                  and not self._withheld_by_filters(gray.shape, evidence, opinion)]
         readings: list[SignReading | None] = [None] * len(found)
         if opinion is not None and asked:
-            for index, reading in zip(asked, read_signs(self.trained_bank, gray,
-                                                        [found[i] for i in asked])):
-                readings[index] = reading
+            # signs read inverted (lit on a dark face) are read so by the second opinion too
+            for inverted in (False, True):
+                group = [i for i in asked if found[i].inverted == inverted]
+                if group:
+                    image = 255 - gray if inverted else gray
+                    for index, reading in zip(group, read_signs(self.trained_bank, image,
+                                                                [found[i] for i in group])):
+                        readings[index] = reading
         return tuple(evidence if isinstance(evidence, Classification)
                      else self._decide(gray, evidence, reading=reading)
                      for evidence, reading in zip(found, readings))
@@ -385,7 +392,8 @@ class Classifier:
         top_psr = evidence.ranked[0][1]
         withhold = self._withheld_by_filters(None if crop else gray.shape, evidence, opinion)
         if opinion is not None and not withhold:
-            reading = reading or read_signs(self.trained_bank, gray, [evidence])[0]
+            reading = reading or read_signs(
+                self.trained_bank, 255 - gray if evidence.inverted else gray, [evidence])[0]
             # a weak correlation peak needs a clearer second opinion
             min_lead = self.trained_bank.min_lead if top_psr >= config.psr_threshold else \
                 max(self.trained_bank.min_lead, config.second_opinion_low_psr_lead)

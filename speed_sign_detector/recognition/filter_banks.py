@@ -30,12 +30,13 @@ from speed_sign_detector.recognition.correlation import disc_window, keep_inside
 from speed_sign_detector.recognition.mace import mace_filters, training_spectra
 from speed_sign_detector.recognition.templates import (
     GRAY_TEMPLATE_GEOMETRY,
+    LIMIT_VALUES_KMH,
     render_master,
     views_from_masters,
 )
 
-#: Speed limits the classifier can read, in km/h.
-SPEED_LIMITS_KMH: tuple[int, ...] = (5, 10, 20, 30, 40, 50, 60, 70, 80, 90, 100, 110, 120, 130)
+#: Speed limits the classifier can read, in km/h: every value the renderer draws.
+SPEED_LIMITS_KMH: tuple[int, ...] = LIMIT_VALUES_KMH
 
 _LOG = logging.getLogger(__name__)
 

@@ -22,8 +22,10 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-#: Speed-limit values that have a rendering, km/h.
-LIMIT_VALUES_KMH: tuple[int, ...] = (5, 10, 20, 30, 40, 50, 60, 70, 80, 90, 100, 110, 120, 130)
+#: Speed-limit values that have a rendering, km/h: every value EU speed-limit signs show
+#: (140 is the motorway limit in Poland and Bulgaria).
+LIMIT_VALUES_KMH: tuple[int, ...] = (5, 10, 20, 30, 40, 50, 60, 70, 80, 90, 100, 110, 120, 130,
+                                     140)
 #: Generic detection templates of the DAGM 2010 paper (two- and three-digit shapes).
 GENERIC_KINDS: tuple[str, ...] = ('00', '100')
 #: End-of-limit signs (VZ 278), one per limit value.

@@ -1,0 +1,107 @@
+"""Which way round a sign is lit: a painted sign (dark digits on a light face) or an
+electronic one (lit digits and ring on a dark face, :mod:`.sign_designs`).
+
+The classifier's templates are painted signs. An electronic sign has the opposite polarity,
+so the classifier reads it inverted where :func:`is_lit_on_dark` says so. The test compares
+three gray levels of a small window around the candidate (cheap next to the correlation):
+
+- the face: the median of the caps above and below the digits (inside the ring, beyond
+  the digits' half height, :data:`FACE_CAPS`), which no value's digits reach;
+- the digits: the mean of the box the digits fill (:data:`DIGIT_BOX`);
+- the ring: the mean of the ring annulus (:data:`RING_RADII`).
+
+A sign is lit on dark where its ring is brighter than its face by :data:`MIN_CONTRAST` gray
+levels and its digit box by half that. A painted sign fails it whatever its lighting (its
+face is brighter than its red ring and its digits); so does an electronic sign of the rarer
+dark-on-lit polarity, which the classifier reads as it reads a painted one, and flat
+clutter.
+"""
+from __future__ import annotations
+
+import functools
+
+import cv2
+import numpy as np
+
+__all__ = ['DIGIT_BOX', 'FACE_CAPS', 'MIN_CONTRAST', 'RING_RADII', 'WINDOW_PX',
+           'is_lit_on_dark', 'polarity_measures']
+
+#: Side of the square window the levels are taken on, pixels (the sign is resampled to
+#: fill it: its outer radius is half the side).
+WINDOW_PX = 24
+#: The face's caps: inside this radius, beyond this half height (fractions of the sign
+#: radius; the digits' half height is 0.37 at most, the ring's inner edge 0.60 or more).
+FACE_CAPS = (0.62, 0.42)
+#: The digits' box: half width and half height, fractions of the sign radius.
+DIGIT_BOX = (0.45, 0.28)
+#: The ring annulus, fractions of the sign radius (the red ring of a painted sign spans
+#: 0.66-0.97, the lamps of an electronic one about 0.76-0.95).
+RING_RADII = (0.74, 0.95)
+#: Least contrast of the ring over the face, gray levels (the digit box needs half).
+MIN_CONTRAST = 20.0
+
+
+@functools.lru_cache(maxsize=4)
+def _masks(window_px: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Flat indices of the face's caps, the digit box and the ring annulus in a window
+    whose sign radius is half its side."""
+    centre = (window_px - 1) / 2.0
+    rows, cols = np.mgrid[:window_px, :window_px]
+    half = window_px / 2.0
+    dy, dx = (rows - centre) / half, (cols - centre) / half
+    distance = np.hypot(dy, dx)
+    caps = np.flatnonzero((distance <= FACE_CAPS[0]) & (np.abs(dy) >= FACE_CAPS[1]))
+    box = np.flatnonzero((np.abs(dx) <= DIGIT_BOX[0]) & (np.abs(dy) <= DIGIT_BOX[1]))
+    ring = np.flatnonzero((distance >= RING_RADII[0]) & (distance <= RING_RADII[1]))
+    return caps, box, ring
+
+
+def _window(gray: np.ndarray, x_px: float, y_px: float, radius_px: float) -> np.ndarray:
+    """(WINDOW_PX, WINDOW_PX) float32 window whose sign radius is half its side, border
+    pixels replicated outside the image."""
+    scale = (WINDOW_PX / 2.0) / radius_px
+    centre = (WINDOW_PX - 1) / 2.0
+    matrix = np.float32([[scale, 0.0, centre - x_px * scale],
+                         [0.0, scale, centre - y_px * scale]])
+    flags = cv2.INTER_AREA if scale < 1.0 else cv2.INTER_LINEAR
+    if scale < 1.0:  # reduce by area: take the window at full size, then resize
+        side = int(np.ceil(2.0 * radius_px)) + 1
+        top, left = int(round(y_px - side / 2.0)), int(round(x_px - side / 2.0))
+        height, width = gray.shape
+        rows = np.clip(np.arange(top, top + side), 0, height - 1)
+        cols = np.clip(np.arange(left, left + side), 0, width - 1)
+        patch = np.ascontiguousarray(gray[rows[:, None], cols[None, :]])
+        return cv2.resize(patch, (WINDOW_PX, WINDOW_PX), interpolation=flags).astype(np.float32)
+    return cv2.warpAffine(gray, matrix, (WINDOW_PX, WINDOW_PX), flags=flags,
+                          borderMode=cv2.BORDER_REPLICATE).astype(np.float32)
+
+
+def polarity_measures(gray: np.ndarray, x_px: float, y_px: float, radius_px: float
+                      ) -> tuple[float, float, float]:
+    """The gray levels the test compares, for a sign centred at (x, y) of ``radius_px``.
+
+    Args:
+        gray: (H, W) uint8 image.
+        x_px, y_px: the sign's centre, pixels.
+        radius_px: its outer radius, pixels (> 0).
+
+    Returns:
+        ``(face, digits, ring)``: the median of the face's caps, the mean of the digit box
+        and the mean of the ring annulus, gray levels 0..255.
+    """
+    window = _window(gray, float(x_px), float(y_px), float(radius_px)).ravel()
+    caps, box, ring = _masks(WINDOW_PX)
+    return (float(np.median(window[caps])), float(window[box].mean()),
+            float(window[ring].mean()))
+
+
+def is_lit_on_dark(gray: np.ndarray, x_px: float, y_px: float, radius_px: float) -> bool:
+    """True when the sign at (x, y) of ``radius_px`` (outer radius, pixels) in the (H, W)
+    uint8 ``gray`` image looks lit on a dark face: its ring brighter than its face by
+    :data:`MIN_CONTRAST` and its digit box by half that (an electronic sign). False for a
+    painted sign, for an unusable position or radius and for flat clutter."""
+    if not (radius_px > 0 and np.isfinite(radius_px) and np.isfinite(x_px)
+            and np.isfinite(y_px)):
+        return False
+    face, digits, ring = polarity_measures(gray, x_px, y_px, radius_px)
+    return ring >= face + MIN_CONTRAST and digits >= face + MIN_CONTRAST / 2.0
