@@ -2,11 +2,15 @@
 
 OpenCV's ``imread`` answers ``None`` for a missing, empty, truncated or foreign file
 alike. :func:`read_gray_image` reads the bytes itself and decodes them, so that the
-evaluation tools can skip such a file and list it with its reason
-(:class:`UnreadableImage`) instead of stopping the whole run.
+evaluation and training tools can skip such a file and list it with its reason
+(:class:`UnreadableImage`) instead of stopping the whole run. OpenCV's own log lines
+about a broken file (``[ WARN:0@0.079] ... grfmt_png.cpp ...``) are silenced while it
+decodes: the tool's message names the file and the reason.
 """
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -52,10 +56,22 @@ def read_gray_image(path: Path) -> np.ndarray:
     if not data:
         raise UnreadableImageError('empty file (0 bytes)')
     try:
-        gray = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE)
+        with _opencv_log_silenced():
+            gray = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE)
     except cv2.error as err:
         raise UnreadableImageError(f'does not decode as an image: {err}') from err
     if gray is None or gray.size == 0:
         raise UnreadableImageError(f'does not decode as an image ({len(data)} bytes; '
                                    f'corrupt, truncated or not an image format OpenCV reads)')
     return gray
+
+
+@contextmanager
+def _opencv_log_silenced() -> Iterator[None]:
+    """OpenCV's log level (process-wide) set to silent inside the block, restored after."""
+    previous = cv2.utils.logging.getLogLevel()
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+    try:
+        yield
+    finally:
+        cv2.utils.logging.setLogLevel(previous)
