@@ -31,6 +31,7 @@ setup(
         'rosbags>=0.10',
         'PyYAML>=6',
         'tqdm>=4.64',
+        'threadpoolctl>=3',
         # rclpy and the message packages as wheels from PyPI; on a ROS 2 Jazzy
         # install they are already on the path and colcon does not read this list.
         'ros-jazzy-rclpy>=7.1',

@@ -152,12 +152,33 @@ class DetectorConfig:
                                         'than this many voting radii (the larger of the '
                                         'two) to a better one is the same sign and dropped.',
                                         low=0.0, high=10.0)
+    detection_width_px: int = setting(
+        960, 'Frames wider than this are scaled down to this width (area averaging, aspect '
+        'kept) for detection, which then costs about the same at any camera resolution; '
+        'the classifier still reads each candidate from the full-resolution pixels. The '
+        'detector\'s radii (min_radius_px, max_radius_px, ...) are pixels of the scaled '
+        'frame: with 960, a 1920x1080 camera\'s signs are found from radius 7 px '
+        '(2 x min_radius_px) to 80 px (2 x max_radius_px) in its own pixels. Narrower '
+        'frames (640x480, 816x480) are detected as they are. 0 = always at full '
+        'resolution.', low=0, high=16384)
+    roi_top_fraction: float = setting(
+        0.0, 'Region of interest: signs are searched only in the band of rows from this '
+        'fraction of the frame height (0 = the top row; e.g. 0.2 leaves out the sky) to '
+        'roi_bottom_fraction.', low=0.0, high=1.0)
+    roi_bottom_fraction: float = setting(
+        1.0, 'Region of interest: signs are searched only down to this fraction of the '
+        'frame height (1 = the bottom row; e.g. 0.8 leaves out the bonnet).',
+        low=0.0, high=1.0)
 
     def __post_init__(self) -> None:
         validate(self)
         if self.max_radius_px <= self.min_radius_px:
             raise ConfigError(f'detector.max_radius_px ({self.max_radius_px}) must be '
                               f'larger than detector.min_radius_px ({self.min_radius_px})')
+        if self.roi_bottom_fraction <= self.roi_top_fraction:
+            raise ConfigError(f'detector.roi_bottom_fraction ({self.roi_bottom_fraction}) '
+                              f'must be larger than detector.roi_top_fraction '
+                              f'({self.roi_top_fraction})')
 
 
 @dataclass(frozen=True)

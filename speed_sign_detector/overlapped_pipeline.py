@@ -85,8 +85,12 @@ class OverlappedPipeline:
             while self._waiting is not None and not self._closed:
                 self._condition.wait()
 
-    def submit(self, gray: np.ndarray, stamp_s: float, context: Any = None) -> None:
+    def submit(self, gray: np.ndarray, stamp_s: float, context: Any = None,
+               conversion_ms: float = 0.0) -> None:
         """Detect a frame here, then recognize it on a helper (see the class).
+
+        ``conversion_ms`` is the time the caller took to make ``gray`` from its message
+        (milliseconds, reported in the result's timings).
 
         Errors of the detection (and, with ``overlap=False``, of the recognition and of
         ``on_result``) propagate from here; with overlap, the recognition's go to
@@ -99,11 +103,11 @@ class OverlappedPipeline:
         if self._closed:
             raise RuntimeError('this OverlappedPipeline was closed')
         if not self.overlap:
-            self._on_result(self.pipeline.process(gray, stamp_s), context)
+            self._on_result(self.pipeline.process(gray, stamp_s, conversion_ms), context)
             return
         self._start_helpers()
         self.wait_until_ready()
-        detected = self.pipeline.detect(gray, stamp_s)
+        detected = self.pipeline.detect(gray, stamp_s, conversion_ms)
         with self._condition:
             if self._closed:
                 raise RuntimeError('this OverlappedPipeline was closed')

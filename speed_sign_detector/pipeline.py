@@ -12,15 +12,15 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import TracebackType
 
 import numpy as np
 
-from speed_sign_detector.blas_threads import blas_thread_advice
+from speed_sign_detector.blas_threads import limit_blas_threads
 from speed_sign_detector.config import PipelineConfig
 from speed_sign_detector.detection.candidates import Candidate
-from speed_sign_detector.detection.detector import Detector
+from speed_sign_detector.detection.detector import DETECTION_STAGES, Detector
 from speed_sign_detector.recognition.classifier import Classification, Classifier
 from speed_sign_detector.recognition.classifier_process import (
     ClassifierProcess,
@@ -29,6 +29,12 @@ from speed_sign_detector.recognition.classifier_process import (
 from speed_sign_detector.tracking import Tracker, TrackState
 
 LOGGER = logging.getLogger(__name__)
+
+#: The stages of :attr:`FrameResult.timings_ms` that follow one another (each frame's
+#: times of these add up to at most its ``total``): image conversion (by the caller),
+#: the detector's :data:`~speed_sign_detector.detection.detector.DETECTION_STAGES`,
+#: classification (``classify``) and tracking (``track``).
+STAGE_TIMINGS: tuple[str, ...] = ('conversion', *DETECTION_STAGES, 'classify', 'track')
 
 
 @dataclass(frozen=True)
@@ -50,8 +56,12 @@ class FrameResult:
         tracks: the tracking table after this frame.
         active_limit_kmh: the limit in force after this frame, 0 when none is known.
         recognized_limit_kmh: a limit newly recognized in this frame, 0 when none.
-        timings_ms: stage durations in milliseconds: ``detect``, ``classify``,
-            ``track``, ``total``.
+        timings_ms: stage durations in milliseconds: each of :data:`STAGE_TIMINGS`
+            (``conversion``: what the caller said converting the message took, 0 when
+            it gave none; ``scaling``, ``gradients``, ``voting``, ``candidates``: parts of
+            the detection; ``classify``; ``track``), ``detect`` (the whole detection:
+            its parts and the frame's validation), and ``total`` (conversion, detection,
+            classification and tracking).
         tracks_reset: True when the frame's time jumped back (a restarted source) and
             the tracker started afresh.
     """
@@ -72,16 +82,21 @@ class DetectedFrame:
     """A frame after detection, waiting for recognition and tracking.
 
     Attributes:
-        gray: the (H, W) uint8 frame.
+        gray: the (H, W) uint8 frame, at full resolution.
         stamp_s: message time of the frame, seconds.
-        candidates: the detector's candidates, best first.
+        candidates: the detector's candidates, best first, in full-resolution pixels.
         detect_ms: time the detection took, milliseconds.
+        detect_stages_ms: its parts (:data:`~speed_sign_detector.detection.detector.
+            DETECTION_STAGES`), milliseconds.
+        conversion_ms: time the caller took to convert the image message, milliseconds.
     """
 
     gray: np.ndarray
     stamp_s: float
     candidates: tuple[Candidate, ...]
     detect_ms: float
+    detect_stages_ms: Mapping[str, float] = field(default_factory=dict)
+    conversion_ms: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -109,6 +124,12 @@ class Pipeline:
     time, :meth:`track` one frame at a time in order. That is what
     :class:`~speed_sign_detector.overlapped_pipeline.OverlappedPipeline` does.
 
+    The detector searches each frame at its working resolution (``detector.
+    detection_width_px``, ``detector.roi_*_fraction``); the classifier reads the
+    candidates from the full-resolution frame. A pipeline that classifies in this
+    process limits numpy's BLAS to one thread for the whole process (see
+    :func:`~speed_sign_detector.blas_threads.limit_blas_threads`).
+
     Example:
         >>> import numpy as np
         >>> with Pipeline(PipelineConfig(backend='numpy', classify=False)) as pipeline:
@@ -123,10 +144,7 @@ class Pipeline:
                                                    backend=self.config.backend)
         self._classifiers = _build_classifiers(self.config)
         self._tracker = Tracker(self.config.tracker)
-        in_process = any(isinstance(item, Classifier) for item in self._classifiers)
-        advice = blas_thread_advice() if in_process else None
-        if advice is not None:
-            LOGGER.warning(advice)
+        _limit_blas_for(self._classifiers)
         LOGGER.info('pipeline ready: backend %s (%s), %s voting%s', self.backend_name,
                     self.renderer, self.vote_method,
                     f', fell back because {self.fallback_reason}' if self.fallback_reason
@@ -169,19 +187,23 @@ class Pipeline:
         """Why the GL backend is not used although it was allowed, else None."""
         return self._live_detector().fallback_reason
 
-    def process(self, gray: np.ndarray, stamp_s: float) -> FrameResult:
+    def process(self, gray: np.ndarray, stamp_s: float, conversion_ms: float = 0.0
+                ) -> FrameResult:
         """Run one frame through detection, recognition and tracking.
 
         Args:
             gray: frame, shape (H, W), dtype uint8.
             stamp_s: message time of the frame in seconds (drives track expiry).
+            conversion_ms: time the caller took to make ``gray`` from its message, in
+                milliseconds (reported in the timings).
 
         Raises:
             ValueError: for an unusable frame (empty, wrong dtype or shape, too small).
         """
-        return self.recognize(self.detect(gray, stamp_s))
+        return self.recognize(self.detect(gray, stamp_s, conversion_ms))
 
-    def detect(self, gray: np.ndarray, stamp_s: float) -> DetectedFrame:
+    def detect(self, gray: np.ndarray, stamp_s: float, conversion_ms: float = 0.0
+               ) -> DetectedFrame:
         """The first half of :meth:`process`: the candidates of one frame.
 
         Runs on the thread that created the pipeline (the detector's GL context).
@@ -191,8 +213,9 @@ class Pipeline:
         """
         detector = self._live_detector()
         started = time.perf_counter()
-        candidates = detector.detect(gray)
-        return DetectedFrame(gray, stamp_s, candidates, (time.perf_counter() - started) * 1e3)
+        candidates, stages_ms = detector.detect_with_stage_times(gray)
+        return DetectedFrame(gray, stamp_s, candidates, (time.perf_counter() - started) * 1e3,
+                             stages_ms, conversion_ms)
 
     def recognize(self, frame: DetectedFrame) -> FrameResult:
         """The second half of :meth:`process`: classification and tracking.
@@ -231,7 +254,7 @@ class Pipeline:
         started = time.perf_counter()
         pairs = list(zip(frame.candidates, classified.classifications))
         update = self._tracker.update(frame.stamp_s, pairs)
-        tracked = time.perf_counter()
+        track_ms = (time.perf_counter() - started) * 1e3
         return FrameResult(
             stamp_s=frame.stamp_s,
             width_px=int(frame.gray.shape[1]),
@@ -241,11 +264,14 @@ class Pipeline:
             tracks=update.tracks,
             active_limit_kmh=update.active_limit_kmh,
             recognized_limit_kmh=update.recognized_limit_kmh,
-            timings_ms={'detect': frame.detect_ms,
+            timings_ms={'conversion': frame.conversion_ms,
+                        **{stage: frame.detect_stages_ms.get(stage, 0.0)
+                           for stage in DETECTION_STAGES},
+                        'detect': frame.detect_ms,
                         'classify': classified.classify_ms,
-                        'track': (tracked - started) * 1e3,
-                        'total': frame.detect_ms + classified.classify_ms
-                        + (tracked - started) * 1e3},
+                        'track': track_ms,
+                        'total': frame.conversion_ms + frame.detect_ms
+                        + classified.classify_ms + track_ms},
             tracks_reset=update.tracks_reset)
 
     def reconfigure(self, config: PipelineConfig) -> None:
@@ -264,6 +290,7 @@ class Pipeline:
             classifiers = _build_classifiers(config)
             _close_classifiers(self._classifiers)
             self._classifiers = classifiers
+            _limit_blas_for(classifiers)
         if config.tracker != self.config.tracker:
             self._tracker.config = config.tracker
         self.config = config
@@ -303,6 +330,13 @@ def _build_classifiers(config: PipelineConfig
     if config.classifier_process:
         return start_classifier_processes(config.classifier, config.classifier_workers)
     return (Classifier(config.classifier),)
+
+
+def _limit_blas_for(classifiers: tuple[Classifier | ClassifierProcess, ...]) -> None:
+    """One BLAS thread for a classifier in this process (its small matrix products;
+    worker processes are started with one already)."""
+    if any(isinstance(item, Classifier) for item in classifiers):
+        limit_blas_threads(1)
 
 
 def _close_classifiers(classifiers: tuple[Classifier | ClassifierProcess, ...]) -> None:

@@ -1,5 +1,6 @@
 """The executables that run the pipeline ask for one BLAS thread before numpy loads, and a
-pipeline built in a process that set none warns."""
+pipeline that classifies in its process limits the loaded BLAS to one thread at run time
+(threadpoolctl), unless the user chose a thread count."""
 from __future__ import annotations
 
 import json
@@ -12,11 +13,8 @@ import pytest
 from speed_sign_detector.blas_threads import (
     BLAS_THREAD_VARIABLES,
     FALLBACK_THREAD_VARIABLES,
-    blas_thread_advice,
     use_one_blas_thread,
 )
-from speed_sign_detector.config import PipelineConfig
-from speed_sign_detector.pipeline import Pipeline
 
 EVERY_THREAD_VARIABLE = BLAS_THREAD_VARIABLES + FALLBACK_THREAD_VARIABLES
 
@@ -76,35 +74,60 @@ def test_node_entry_point_loads_no_numpy_before_it_sets_one_thread() -> None:
     assert result['values']['OPENBLAS_NUM_THREADS'] == '1'
 
 
-def test_advice_only_where_no_thread_variable_is_set(monkeypatch) -> None:
-    for name in EVERY_THREAD_VARIABLE:
-        monkeypatch.delenv(name, raising=False)
-    advice = blas_thread_advice(cpu_count=4)
-    assert advice is not None
-    assert 'runs 4 threads' in advice and 'OPENBLAS_NUM_THREADS=1' in advice
-    assert blas_thread_advice(cpu_count=1) is None  # one core: nothing to take
-    for name in EVERY_THREAD_VARIABLE:
-        monkeypatch.setenv(name, '2')  # any choice of the user's, even more threads
-        assert blas_thread_advice(cpu_count=4) is None
-        monkeypatch.delenv(name)
+#: Run in a fresh interpreter: the BLAS pools (threadpoolctl) after numpy loads, and after
+#: a pipeline is built with the config given as JSON in argv[1].
+POOLS_PROBE = """
+import json, sys
+import numpy
+from threadpoolctl import threadpool_info
+
+from speed_sign_detector.config import PipelineConfig
+from speed_sign_detector.pipeline import Pipeline
+
+def blas_threads():
+    return [pool['num_threads'] for pool in threadpool_info() if pool['user_api'] == 'blas']
+
+before = blas_threads()
+settings = json.loads(sys.argv[1])
+with Pipeline(PipelineConfig(backend='numpy', **settings)):
+    during = blas_threads()
+print(json.dumps({'before': before, 'during': during, 'after': blas_threads()}))
+"""
 
 
-@pytest.mark.parametrize('preset', [None, 'OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS'])
-def test_pipeline_warns_when_no_thread_variable_is_set(monkeypatch, caplog, preset) -> None:
-    for name in EVERY_THREAD_VARIABLE:
-        monkeypatch.delenv(name, raising=False)
-    if preset is not None:
-        monkeypatch.setenv(preset, '1')
-    monkeypatch.setattr(os, 'cpu_count', lambda: 2)  # the same on a one-core machine
-    with caplog.at_level('WARNING', logger='speed_sign_detector.pipeline'):
-        with Pipeline(PipelineConfig(backend='numpy')):
-            pass
-        with Pipeline(PipelineConfig(backend='numpy', classify=False)):
-            pass  # no classifier, no matrix products: never a warning
-    warnings = [record.getMessage() for record in caplog.records
-                if record.name == 'speed_sign_detector.pipeline'
-                and record.levelname == 'WARNING']
-    if preset is None:
-        assert len(warnings) == 1 and 'OPENBLAS_NUM_THREADS=1' in warnings[0]
-    else:
-        assert warnings == []
+def blas_pools(settings: dict, **preset: str) -> dict[str, list[int]]:
+    """The BLAS pools' thread counts of a fresh interpreter before, while and after a
+    pipeline with ``settings`` is open, with only the ``preset`` thread variables set."""
+    environment = {name: value for name, value in os.environ.items()
+                   if name not in EVERY_THREAD_VARIABLE}
+    environment.update(preset)
+    done = subprocess.run([sys.executable, '-c', POOLS_PROBE, json.dumps(settings)],
+                          capture_output=True, text=True, env=environment, timeout=300)
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def test_a_classifying_pipeline_limits_the_blas_to_one_thread() -> None:
+    """With no thread variable set, numpy's BLAS starts one thread per core (2 here); a
+    pipeline that classifies in its process limits every BLAS pool to 1 thread, for the
+    rest of the process."""
+    pools = blas_pools({})
+    cores = os.cpu_count() or 1
+    assert pools['before'], 'numpy loaded no BLAS that threadpoolctl sees'
+    assert cores == 1 or max(pools['before']) > 1, pools  # the probe can see a limit
+    assert pools['during'] == [1] * len(pools['before'])
+    assert pools['after'] == pools['during']
+
+
+def test_no_limit_without_a_classifier_in_the_process() -> None:
+    """Detection alone (no matrix products) leaves the BLAS as it was."""
+    pools = blas_pools({'classify': False})
+    assert pools['during'] == pools['before']
+
+
+@pytest.mark.parametrize('variable', ['OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS'])
+def test_the_users_thread_count_stands(variable: str) -> None:
+    """A thread count the user set (even more threads) is left as the BLAS read it."""
+    pools = blas_pools({}, **{variable: '2'})
+    assert pools['during'] == pools['before'] == [min(2, os.cpu_count() or 1)] * len(
+        pools['before'])

@@ -5,14 +5,21 @@ grayscale frames and returns up to ``config.max_candidates`` :class:`Candidate`,
 first. ``backend='auto'`` uses the GL backend and falls back to the numpy reference
 when no OpenGL context can be created (the reason is logged and kept in
 ``fallback_reason``).
+
+Working resolution: a frame wider than ``config.detection_width_px`` is scaled down to
+that width (``cv2.INTER_AREA``) before voting, and only the band of rows between
+``config.roi_top_fraction`` and ``config.roi_bottom_fraction`` is searched; candidates
+are reported in the full-resolution frame's pixels (see :func:`working_frame`).
 """
 from __future__ import annotations
 
 import dataclasses
 import logging
+import time
 from types import TracebackType
 from typing import Self
 
+import cv2
 import numpy as np
 
 from speed_sign_detector.config import DetectorConfig
@@ -28,16 +35,96 @@ from speed_sign_detector.detection.gradients import validate_frame
 from speed_sign_detector.detection.voting_gl import SOFTWARE_RENDERERS
 from speed_sign_detector.detection.voting_numpy import (
     RadiusBand,
+    compute_edges,
     min_frame_size_px,
     plan_bands,
+    vote_band,
     vote_images,
     vote_signs,
 )
-from speed_sign_detector.errors import ConfigError, DetectorError
+from speed_sign_detector.errors import ConfigError, DetectorError, InvalidFrameError
 
 LOGGER = logging.getLogger(__name__)
 
 BACKENDS = ('auto', 'gl', 'numpy')
+
+#: The detection stages :meth:`Detector.detect_with_stage_times` times, in order:
+#: scaling (validation, region of interest, working resolution), gradients (gray scale,
+#: pyramid, Sobel, edge lists), voting, candidates (block maxima, read-back, selection).
+DETECTION_STAGES: tuple[str, ...] = ('scaling', 'gradients', 'voting', 'candidates')
+#: The GL backend's own stages (``GLVoter.stage_ms``) in each of :data:`DETECTION_STAGES`.
+_GL_STAGES: dict[str, tuple[str, ...]] = {
+    'gradients': ('upload_pyramid', 'edges'), 'voting': ('vote',),
+    'candidates': ('reduce', 'readback')}
+
+
+@dataclasses.dataclass(frozen=True)
+class WorkingFrame:
+    """The part of a frame the detector votes on, at its working resolution.
+
+    A working pixel ``(x, y)`` (pixel centres at whole coordinates) is the full-resolution
+    point ``((x + 0.5) * scale_x - 0.5, top_row + (y + 0.5) * scale_y - 0.5)``: the area
+    ``cv2.INTER_AREA`` averaged into it.
+
+    Attributes:
+        image: (h, w) uint8, the region of interest scaled to the working resolution.
+        scale_x, scale_y: full-resolution pixels per working pixel (1 = not scaled).
+        top_row: first full-resolution row of the region of interest.
+    """
+
+    image: np.ndarray
+    scale_x: float
+    scale_y: float
+    top_row: int
+
+    def to_full_resolution(self, candidate: Candidate) -> Candidate:
+        """``candidate`` found on :attr:`image`, in full-resolution pixels (the radius
+        scaled by the mean of the two scales)."""
+        if self.scale_x == 1.0 and self.scale_y == 1.0 and self.top_row == 0:
+            return candidate
+        return dataclasses.replace(
+            candidate,
+            x_px=(candidate.x_px + 0.5) * self.scale_x - 0.5,
+            y_px=self.top_row + (candidate.y_px + 0.5) * self.scale_y - 0.5,
+            radius_px=candidate.radius_px * 0.5 * (self.scale_x + self.scale_y))
+
+
+def working_frame(gray: np.ndarray, config: DetectorConfig, min_size_px: int = 1
+                  ) -> WorkingFrame:
+    """The region of interest of a validated (H, W) uint8 frame at the working resolution.
+
+    Rows ``round(roi_top_fraction * H)`` to ``round(roi_bottom_fraction * H)`` (exclusive)
+    are kept; a frame wider than ``detection_width_px`` (when not 0) is scaled down with
+    ``cv2.INTER_AREA`` to that width and the band's height times the same factor.
+
+    Raises:
+        InvalidFrameError: when the scaled band is smaller than ``min_size_px`` on a side
+            (naming the parameters that made it so).
+    """
+    height, width = gray.shape
+    top = min(height - 1, max(0, round(config.roi_top_fraction * height)))
+    bottom = max(top + 1, min(height, round(config.roi_bottom_fraction * height)))
+    band = gray[top:bottom] if (top, bottom) != (0, height) else gray
+    target = config.detection_width_px
+    if 0 < target < width:
+        scaled_width = target
+        scaled_height = max(1, round(band.shape[0] * target / width))
+        image = cv2.resize(band, (scaled_width, scaled_height), interpolation=cv2.INTER_AREA)
+    else:
+        image = np.ascontiguousarray(band)
+    if image.shape[0] < min_size_px or image.shape[1] < min_size_px:
+        if image.shape == gray.shape:
+            raise InvalidFrameError(f'frame {width}x{height} is smaller than the voting '
+                                    f'window ({min_size_px} px on each side)')
+        raise InvalidFrameError(
+            f'frame {width}x{height} leaves {image.shape[1]}x{image.shape[0]} pixels to '
+            f'search (rows {top} to {bottom} by detector.roi_top_fraction '
+            f'{config.roi_top_fraction} and roi_bottom_fraction '
+            f'{config.roi_bottom_fraction}, width by detector.detection_width_px {target}), '
+            f'smaller than the voting window ({min_size_px} px on each side); widen the '
+            f'region of interest or raise detector.detection_width_px')
+    return WorkingFrame(image, band.shape[1] / image.shape[1], band.shape[0] / image.shape[0],
+                        top)
 
 
 def cpu_detector_advice(backend_name: str, renderer: str, config: DetectorConfig) -> str | None:
@@ -112,6 +199,7 @@ class Detector:
                 LOGGER.warning('GL detector unavailable (%s); using the numpy reference',
                                self.fallback_reason)
         if self._gl is not None:
+            self._gl.profile_stages(True)  # per-stage times (a glFinish between stages)
             self.backend_name = 'gl'
             self.renderer = self._gl.renderer
             self.vote_method = self._gl.vote_method
@@ -126,23 +214,67 @@ class Detector:
     def detect(self, gray: np.ndarray) -> tuple[Candidate, ...]:
         """Candidates of one (H, W) uint8 frame, best first (at most max_candidates).
 
-        ``radius_px`` is the voting radius (harmonic mean voting distance) divided by
-        ``config.voting_edge_radius_ratio`` (see :class:`Candidate`).
+        The frame's region of interest is searched at the working resolution (see
+        :func:`working_frame`); the candidates' ``x_px``, ``y_px`` and ``radius_px`` are
+        full-resolution pixels of ``gray``. ``radius_px`` is the voting radius (harmonic
+        mean voting distance) divided by ``config.voting_edge_radius_ratio`` (see
+        :class:`Candidate`).
 
         Raises:
             InvalidFrameError (a ValueError): unusable frame.
             DetectorError: the detector is closed.
         """
-        maxima = self.block_maxima(gray)
+        return self.detect_with_stage_times(gray)[0]
+
+    def detect_with_stage_times(self, gray: np.ndarray
+                                ) -> tuple[tuple[Candidate, ...], dict[str, float]]:
+        """:meth:`detect`, and the milliseconds each of :data:`DETECTION_STAGES` took.
+
+        With the GL backend each stage ends with a wait for the driver (glFinish), so
+        that its time is its own.
+
+        Raises:
+            InvalidFrameError (a ValueError): unusable frame.
+            DetectorError: the detector is closed.
+        """
+        started = time.perf_counter()
+        if self._closed:
+            raise DetectorError('the detector has been closed')
+        working = working_frame(validate_frame(gray, 1), self.config, self.min_size_px)
+        scaled = time.perf_counter()
+        stage_ms = {'scaling': (scaled - started) * 1e3}
+        if self._gl is not None:
+            self._gl.profile_stages(True)   # forget the last frame's times
+            maxima = self._gl.block_maxima(working.image)
+            gl_ms = self._gl.stage_ms or {}
+            for stage, parts in _GL_STAGES.items():
+                stage_ms[stage] = sum(gl_ms.get(part, 0.0) for part in parts)
+            voted = time.perf_counter()
+        else:
+            edges = compute_edges(working.image, self.config)
+            edged = time.perf_counter()
+            frame_size = (working.image.shape[1], working.image.shape[0])
+            tent = self.config.vote_profile == 'tent'
+            votes = [vote_band(edges[band.level], band, vote_signs(self.config, band),
+                               frame_size, tent) for band in self.bands]
+            voted = time.perf_counter()
+            stage_ms['gradients'] = (edged - scaled) * 1e3
+            stage_ms['voting'] = (voted - edged) * 1e3
+            maxima = block_maxima(votes, self.bands, working.image.shape,
+                                  self.config.block_size_px, self.score_normalisers)
+            stage_ms['candidates'] = 0.0
         candidates = select_candidates(maxima, self.config.max_candidates,
                                        self.config.min_score, self.config.suppression_factor)
         ratio = self.config.voting_edge_radius_ratio
-        return tuple(dataclasses.replace(candidate, radius_px=candidate.radius_px / ratio)
-                     for candidate in candidates)
+        found = tuple(working.to_full_resolution(
+            dataclasses.replace(candidate, radius_px=candidate.radius_px / ratio))
+            for candidate in candidates)
+        stage_ms['candidates'] += (time.perf_counter() - voted) * 1e3
+        return found, stage_ms
 
     def block_maxima(self, gray: np.ndarray) -> BlockMaxima:
-        """The per-block best vote pixels of a frame (before top-N selection; radii are
-        voting radii)."""
+        """The per-block best vote pixels of a frame as given (before top-N selection;
+        radii are voting radii; no working resolution or region of interest)."""
         frame = self._check(gray)
         if self._gl is not None:
             return self._gl.block_maxima(frame)
@@ -150,7 +282,8 @@ class Detector:
                             self.config.block_size_px, self.score_normalisers)
 
     def vote_images(self, gray: np.ndarray) -> list[np.ndarray]:
-        """Vote image of every radius band (for tests and pictures).
+        """Vote image of every radius band of the frame as given (for tests and pictures;
+        no working resolution or region of interest).
 
         Returns:
             one (H_level, W_level, CHANNELS) float32 array per band of ``self.bands``:

@@ -532,8 +532,10 @@ class DetectorNodeBase:
         stamp_ns = header.stamp.sec * 1_000_000_000 + header.stamp.nanosec
         stamp_s = stamp_ns * 1e-9 if stamp_ns > 0 else frame.received_ns * 1e-9
         try:
+            started = time.perf_counter()
             gray = message_to_gray(frame.message)
-            stages.submit(gray, stamp_s, context=(frame, gray, stamp_ns))
+            stages.submit(gray, stamp_s, context=(frame, gray, stamp_ns),
+                          conversion_ms=(time.perf_counter() - started) * 1e3)
         except (ImageConversionError, ValueError) as err:
             self._reject(frame, str(err))
         except Exception as err:  # noqa: BLE001 - one bad frame must not stop the node

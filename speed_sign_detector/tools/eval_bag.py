@@ -59,8 +59,15 @@ Example::
   ``fps``, ``latency_ms_p50``, ``latency_ms_p95``
       frames per second over the whole run (reading, decoding, pipeline, writing; the
       detection of a frame overlaps the recognition of the one before, as in the node)
-      and the pipeline's processing time per frame (detection, recognition and
-      tracking), milliseconds.
+      and the pipeline's processing time per frame (image conversion, detection,
+      recognition and tracking), milliseconds.
+  ``stage_ms_p50``, ``stage_ms_mean``
+      per stage (:data:`speed_sign_detector.pipeline.STAGE_TIMINGS`: ``conversion``,
+      ``scaling``, ``gradients``, ``voting``, ``candidates``, ``classify``, ``track``;
+      and ``detect``, the whole detection, and ``total``) the median and the mean
+      time per frame, milliseconds: where the time goes on this host. The stages of
+      STAGE_TIMINGS follow one another, so their means add up to at most the mean
+      ``total``.
 
 A truncated or damaged bag ends the run with a non-zero exit status after the frames
 before the damage were processed, reported (the JSON line is still printed) and
@@ -427,6 +434,7 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
     stopped_by: SpeedSignError | None = None
     stamps_s: list[float] = []
     latencies_ms: list[float] = []
+    stage_samples_ms: dict[str, list[float]] = {}
     events: list[LimitEvent] = []
     recognized_ids: set[int] = set()
     limit_changes: list[tuple[float, int]] = []
@@ -456,6 +464,8 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
                 nonlocal active_limit
                 stamp_ns, frame_id, gray, message = context
                 latencies_ms.append(result.timings_ms['total'])
+                for stage, duration_ms in result.timings_ms.items():
+                    stage_samples_ms.setdefault(stage, []).append(duration_ms)
                 stamps_s.append(stamp_ns * 1e-9)
                 new_events = new_limit_events(result, recognized_ids)
                 events.extend(new_events)
@@ -491,9 +501,11 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
                     frame_id = str(getattr(getattr(item.message, 'header', None),
                                            'frame_id', ''))
                     try:
+                        converting = time.perf_counter()
                         gray = message_to_gray(item.message)
                         stages.submit(gray, stamp_ns * 1e-9,
-                                      context=(stamp_ns, frame_id, gray, item.message))
+                                      context=(stamp_ns, frame_id, gray, item.message),
+                                      conversion_ms=(time.perf_counter() - converting) * 1e3)
                     except ValueError as err:
                         if isinstance(err, SpeedSignError):
                             raise
@@ -537,6 +549,10 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
         'fps': frames / loop_s if loop_s > 0 else 0.0,
         'latency_ms_p50': float(np.percentile(latencies_ms, 50)) if latencies_ms else None,
         'latency_ms_p95': float(np.percentile(latencies_ms, 95)) if latencies_ms else None,
+        'stage_ms_p50': {stage: float(np.percentile(samples, 50))
+                         for stage, samples in stage_samples_ms.items()},
+        'stage_ms_mean': {stage: float(np.mean(samples))
+                          for stage, samples in stage_samples_ms.items()},
         'elapsed_s': elapsed_s,
         'limit_events': [{'stamp_s': e.stamp_s, 'time_s': round(e.stamp_s - stamps_s[0], 6),
                           'limit_kmh': e.limit_kmh,
