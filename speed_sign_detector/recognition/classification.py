@@ -48,11 +48,17 @@ class Classification:
         return self.limit_kmh is not None
 
 
+#: Filter classes read as the end of the limit: end-of-limit signs (VZ 278) and the end of
+#: all restrictions (VZ 282), which ends the limit in force too.
+END_OF_LIMIT_CLASSES: frozenset[str] = frozenset({'end_of_limit', 'end_of_restrictions'})
+
+
 def label_of_class(class_name: str) -> str:
-    """The label a filter class name stands for: the limit's value, ``'end_of_limit'``,
-    or ``'other_sign'`` for every other sign drawn (look-alikes)."""
+    """The label a filter class name stands for: the limit's value, ``'end_of_limit'``
+    (:data:`END_OF_LIMIT_CLASSES`), or ``'other_sign'`` for every other sign drawn
+    (look-alikes)."""
     if class_name.isdigit():
         return class_name
-    if class_name == 'end_of_limit':
+    if class_name in END_OF_LIMIT_CLASSES:
         return LABEL_END_OF_LIMIT
     return LABEL_OTHER_SIGN

@@ -37,7 +37,8 @@ from speed_sign_detector.recognition.templates import (
 )
 
 __all__ = ['LED_DESIGNS', 'SIGN_DESIGNS', 'YELLOW_GEOMETRY', 'DesignError', 'LedLook',
-           'design_label', 'render_design', 'design_gray', 'is_lit_on_dark']
+           'design_crop', 'design_gray', 'design_label', 'design_training_crops',
+           'lit_on_dark_design', 'random_look', 'render_design']
 
 #: Every design :func:`render_design` draws.
 SIGN_DESIGNS: tuple[str, ...] = ('painted', 'yellow', 'led', 'led_amber', 'led_dot_matrix',
@@ -92,7 +93,7 @@ class LedLook:
                               f'got {self.glow}, {self.glow_radius}, {self.exposure}')
 
 
-def is_lit_on_dark(design: str) -> bool:
+def lit_on_dark_design(design: str) -> bool:
     """True for the designs whose face is darker than their digits and ring (the opposite
     polarity of a painted sign)."""
     return design in ('led', 'led_amber', 'led_dot_matrix')
@@ -217,3 +218,79 @@ def design_gray(kind: str, diameter_px: int, design: str, background: np.ndarray
     region = out[top:top + diameter_px, left:left + diameter_px]
     out[top:top + diameter_px, left:left + diameter_px] = gray + (1.0 - alpha) * region
     return out
+
+
+def _background(side: int, design: str, rng: np.random.Generator) -> np.ndarray:
+    """(side, side) float32 gray surroundings of a sign: a smooth textured scene (sky,
+    foliage, buildings) for a painted or yellow sign; for an electronic one the black
+    housing of a gantry display around the disc."""
+    mean = float(rng.uniform(50.0, 210.0))
+    noise = rng.normal(0.0, 1.0, (side, side)).astype(np.float32)
+    texture = cv2.GaussianBlur(noise, (0, 0), float(rng.uniform(1.0, 4.0)))
+    texture *= float(rng.uniform(5.0, 40.0)) / (float(texture.std()) + 1e-6)
+    scene = mean + texture
+    if design in LED_DESIGNS:
+        scene[:] = float(rng.uniform(10.0, 45.0)) + 0.2 * texture
+    return scene
+
+
+def _camera(image: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """A float gray image as a camera delivers it: blur, noise and JPEG (uint8)."""
+    out = cv2.GaussianBlur(image, (0, 0), float(rng.uniform(0.3, 1.2)))
+    out = np.clip(out + rng.normal(0.0, float(rng.uniform(1.0, 5.0)), out.shape), 0, 255)
+    quality = int(rng.integers(30, 90))
+    ok, encoded = cv2.imencode('.jpg', out.astype(np.uint8), [cv2.IMWRITE_JPEG_QUALITY, quality])
+    if not ok:
+        raise DesignError('JPEG encoding of a rendered crop failed')
+    return cv2.imdecode(encoded, cv2.IMREAD_GRAYSCALE)
+
+
+def random_look(design: str, rng: np.random.Generator) -> LedLook:
+    """An LED look drawn at random: a glow from none to strong, an exposure from right to
+    about twice too long (ignored by the painted designs)."""
+    del design  # the same range for every LED design
+    return LedLook(glow=float(rng.uniform(0.0, 1.0)), glow_radius=float(rng.uniform(0.03, 0.08)),
+                   exposure=float(rng.uniform(0.8, 2.0)))
+
+
+def design_crop(kind: str, design: str, diameter_px: int, rng: np.random.Generator
+                ) -> np.ndarray:
+    """A camera's crop of one sign of ``design`` (GTSRB framing: a margin of 10% of the
+    diameter, at least 5 px), on random surroundings, with a random LED look, blur, noise
+    and JPEG compression.
+
+    Returns:
+        (S, S) uint8 gray crop, S = ``diameter_px`` + 2 margins.
+    """
+    margin = max(5, int(round(0.1 * diameter_px)))
+    side = int(diameter_px) + 2 * margin
+    scene = design_gray(kind, int(diameter_px), design, _background(side, design, rng),
+                        random_look(design, rng))
+    return _camera(scene, rng)
+
+
+def design_training_crops(per_kind: int, rng: np.random.Generator
+                          ) -> tuple[list[np.ndarray], list[str]]:
+    """Crops of the designs a painted-sign training set lacks, as the classifier's second
+    opinion sees them, ``per_kind`` of each kind and design, diameters 16-60 px:
+
+    - every limit on an LED sign (white, amber, dot matrix; inverted, as the classifier
+      reads a sign lit on a dark face) and on a dark-on-lit LED sign;
+    - every limit on a yellow-faced sign;
+    - the end of all restrictions (VZ 282), labelled ``'end_of_limit'``
+      (:func:`design_label`).
+
+    Returns:
+        (gray uint8 crops, labels).
+    """
+    crops: list[np.ndarray] = []
+    labels: list[str] = []
+    limits = [kind for kind in SIGN_KINDS if kind.isdigit() and kind != '00']
+    jobs = [(kind, design) for kind in limits for design in LED_DESIGNS + ('yellow',)]
+    jobs.append(('end_of_restrictions', 'painted'))
+    for kind, design in jobs:
+        for _ in range(per_kind):
+            crop = design_crop(kind, design, int(rng.integers(16, 61)), rng)
+            crops.append(255 - crop if lit_on_dark_design(design) else crop)
+            labels.append(design_label(kind))
+    return crops, labels
