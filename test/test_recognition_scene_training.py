@@ -26,7 +26,7 @@ from speed_sign_detector.recognition.sign_features import FEATURE_SIZE
 from speed_sign_detector.recognition.trained_bank import TrainedBank, load_trained_bank
 from speed_sign_detector.scene_truth import SceneSign
 from speed_sign_detector.training.bank_training import (
-    _rendered_classifier,
+    rendered_classifier,
     locate_signs,
     read_crops,
     train_bank,
@@ -103,7 +103,7 @@ def test_scenes_teach_their_signs_and_background(scene_folder: Path, tmp_path: P
     scenes, unreadable = detect_scenes([scene_folder, broken])
     assert len(scenes) == len(SCENES) + 1
     assert len(unreadable) == 1 and '00009.jpg' in unreadable[0]
-    examples = read_scene_examples(scenes, _rendered_classifier(SMALL), COPIES, 0, unreadable)
+    examples = read_scene_examples(scenes, rendered_classifier(SMALL), COPIES, 0, unreadable)
     counts = examples.counts()
     # every limit sign of the scenes is located and labelled with its value ...
     assert {'30', '50', '80'} <= set(counts), counts
@@ -134,7 +134,7 @@ def test_bank_trained_with_scenes_records_them_and_knows_background(
 
 def test_scene_cross_validation_answers_every_scene_with_a_bank_that_never_saw_it(
         crop_folder: Path, scene_folder: Path) -> None:
-    classifier = _rendered_classifier(SMALL)
+    classifier = rendered_classifier(SMALL)
     crops, images, _ = read_crops([crop_folder])
     located = locate_signs(classifier, crops, images)
     scenes, _ = detect_scenes([scene_folder])
@@ -166,7 +166,8 @@ def test_train_command_learns_from_scenes_and_reports_a_missing_folder(
     done = subprocess.run(_train_command() + [
         'build', str(out), str(crop_folder), '--scenes', str(scene_folder), '--config',
         str(config), '--augmented-copies', '0', '--rendered-per-kind', '1',
-        '--scene-copies', '1', '--epochs', '2', '--members', '1', '--json', '-q'],
+        '--scene-copies', '1', '--epochs', '2', '--members', '1', '--composites-per-value', '2',
+        '--json', '-q'],
         capture_output=True, text=True, timeout=300, env=env)
     assert done.returncode == 0, done.stderr
     summary = json.loads(done.stdout.strip().splitlines()[-1])

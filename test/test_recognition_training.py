@@ -58,7 +58,8 @@ from speed_sign_detector.training.bank_training import (
 SMALL = ClassifierConfig(max_radius_px=24.0, cache_dir='', bank_file='none')
 #: GTSRB class id -> rendered kind.
 KINDS = {1: '30', 2: '50', 5: '80', 17: 'no_entry'}
-TRAINING = TrainingConfig(augmented_copies=1, examples_per_class=2, rendered_per_kind=3)
+TRAINING = TrainingConfig(augmented_copies=1, examples_per_class=2, rendered_per_kind=3,
+                          composites_per_value=4)
 
 
 def crop_of(kind: str, sign_px: int, margin_px: int, seed: int, blur_px: float = 0.0
@@ -340,6 +341,7 @@ def test_train_command_builds_a_bank_and_reports_bad_input(tmp_path: Path,
     done = subprocess.run(_train_command() + [
         'build', str(out), str(crop_folder), '--config', str(config), '--augmented-copies', '0',
         '--examples-per-class', '1', '--rendered-per-kind', '1', '--real-filter-weight', '0.5',
+        '--composites-per-value', '2',
         '--json', '-q'], capture_output=True, text=True, timeout=300, env=env)
     assert done.returncode == 0, done.stderr
     summary = json.loads(done.stdout.strip().splitlines()[-1])

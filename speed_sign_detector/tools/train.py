@@ -7,7 +7,9 @@
 - ``validate DIR [DIR ...]``: k-fold validation split by track (a physical sign is never
   on both sides): per-class accuracy, wrong-limit and withheld rates, look-alikes read
   as a limit, for the rendered-only classifier, the trained filters, and the trained
-  filters with the second opinion, side by side.
+  filters with the second opinion, side by side. With ``--leave-one-value-out``: for each
+  limit value with real crops, a bank trained without any of them reads them (how a
+  value with no real crops, such as 130 km/h, is read; :mod:`..training.value_holdout`).
 
 Both take ``--scenes SCENE_DIR`` (repeatable): annotated scene folders (GTSDB format:
 ``images/`` and ``gt.txt``) whose detector candidates teach the second opinion real
@@ -31,6 +33,12 @@ from speed_sign_detector import __version__
 from speed_sign_detector.config import ClassifierConfig, DetectorConfig, PipelineConfig, load_yaml
 from speed_sign_detector.errors import SpeedSignError
 from speed_sign_detector.recognition.trained_bank import save_trained_bank
+from speed_sign_detector.tools.cli_types import (
+    integer_in_range,
+    non_negative_integer,
+    non_negative_number,
+    positive_integer,
+)
 from speed_sign_detector.tools.progress import progress_bar
 from speed_sign_detector.tools.run_control import run_subcommand
 from speed_sign_detector.training.bank_training import (
@@ -41,6 +49,7 @@ from speed_sign_detector.training.bank_training import (
     cross_validate,
     train_bank,
 )
+from speed_sign_detector.training.value_holdout import leave_one_value_out
 
 _DEFAULTS = TrainingConfig()
 #: Column titles of :func:`cross_validate`'s variants.
@@ -65,49 +74,57 @@ def build_parser() -> argparse.ArgumentParser:
     common.add_argument('--model', choices=SECOND_OPINION_MODELS, default=_DEFAULTS.model,
                         help='the second opinion: an ensemble of small networks, or a ridge '
                         'model (linear)')
-    common.add_argument('--ridge', type=float, default=_DEFAULTS.ridge,
+    common.add_argument('--ridge', type=non_negative_number, default=_DEFAULTS.ridge,
                         help='regularisation of the linear second opinion')
-    common.add_argument('--hidden-units', type=int, default=_DEFAULTS.hidden_units,
+    common.add_argument('--hidden-units', type=positive_integer, default=_DEFAULTS.hidden_units,
                         help='hidden units of each network of the second opinion')
-    common.add_argument('--epochs', type=int, default=_DEFAULTS.epochs,
+    common.add_argument('--epochs', type=positive_integer, default=_DEFAULTS.epochs,
                         help='training passes of each network')
-    common.add_argument('--members', type=int, default=_DEFAULTS.members,
+    common.add_argument('--members', type=positive_integer, default=_DEFAULTS.members,
                         help='networks in the second opinion\'s ensemble')
-    common.add_argument('--candidates', type=int, default=_DEFAULTS.candidates,
+    common.add_argument('--candidates', type=positive_integer, default=_DEFAULTS.candidates,
                         help='the second opinion chooses among this many leading labels of '
                         'the correlation filters')
-    common.add_argument('--min-lead', type=float, default=None,
+    common.add_argument('--min-lead', type=non_negative_number, default=None,
                         help='least lead of the second opinion\'s answer over its next best '
                         'label; less withholds the answer (default: '
                         + ', '.join(f'{lead} for {model}'
                                     for model, lead in MIN_LEAD_OF_MODEL.items())
                         + ')%(default).0s')  # (the formatter adds no "default: None")
-    common.add_argument('--augmented-copies', type=int, default=_DEFAULTS.augmented_copies,
+    common.add_argument('--augmented-copies', type=non_negative_integer,
+                        default=_DEFAULTS.augmented_copies,
                         help='degraded copies (blur, JPEG, contrast, scale) of each crop')
-    common.add_argument('--examples-per-class', type=int,
+    common.add_argument('--examples-per-class', type=non_negative_integer,
                         default=_DEFAULTS.examples_per_class,
                         help='mean real images per class in the composite filters (0: none)')
-    common.add_argument('--rendered-per-kind', type=int, default=_DEFAULTS.rendered_per_kind,
+    common.add_argument('--rendered-per-kind', type=non_negative_integer,
+                        default=_DEFAULTS.rendered_per_kind,
                         help='rendered, degraded crops of every sign kind the package draws '
                         'added to the second opinion\'s training (values without real '
                         'examples: 5, 10, 40, 90, 110, 130 km/h)')
-    common.add_argument('--arched-six-per-kind', type=int,
+    common.add_argument('--arched-six-per-kind', type=non_negative_integer,
                         default=_DEFAULTS.arched_six_per_kind,
                         help='more rendered crops of each limit with a 6 (60 km/h), drawn '
                         'with the older lettering\'s arched 6, which real crops rarely '
                         'show and the rest of the classifier reads as 8')
+    common.add_argument('--composites-per-value', type=non_negative_integer,
+                        default=_DEFAULTS.composites_per_value,
+                        help='composite crops of every limit value (5 to 140 km/h) made from '
+                        'the real crops\' digits, so that values without real crops are '
+                        'learned from real pixels too (0: renderings only)')
     common.add_argument('--scenes', type=Path, action='append', default=[],
                         metavar='SCENE_DIR', help='annotated scene folder (GTSDB format: '
                         'images/ and gt.txt) to learn real signs and background from; '
                         'repeatable')
-    common.add_argument('--scene-copies', type=int, default=_DEFAULTS.scene_copies,
+    common.add_argument('--scene-copies', type=non_negative_integer,
+                        default=_DEFAULTS.scene_copies,
                         help='degraded copies of each example cut from the scenes')
-    common.add_argument('--real-filter-weight', type=float,
+    common.add_argument('--real-filter-weight', type=non_negative_number,
                         default=_DEFAULTS.real_filter_weight,
                         help='weight of the composite filters trained from the real crops in '
                              'ranking the labels the second opinion chooses among, against '
                              'the rendered filters\' 1 (0: no real filters)')
-    common.add_argument('--real-filter-noise', type=float,
+    common.add_argument('--real-filter-noise', type=non_negative_number,
                         default=_DEFAULTS.real_filter_noise,
                         help='the real filters\' white-noise weight (OT-MACH trade-off), '
                              'relative to the examples\' mean power')
@@ -130,7 +147,16 @@ def build_parser() -> argparse.ArgumentParser:
                                      help='k-fold validation split by track',
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     validate.add_argument('folders', type=Path, nargs='+', help='labelled crop folders')
-    validate.add_argument('--folds', type=int, default=5, help='number of folds (>= 2)')
+    validate.add_argument('--folds', type=integer_in_range(minimum=2), default=5,
+                          help='number of folds (>= 2)')
+    validate.add_argument('--leave-one-value-out', action='store_true',
+                          help='instead of the k folds: for each limit value V with real '
+                          'crops, train a bank without any real crop of V and read all of '
+                          'V\'s crops (and one track fold of the others): how a value '
+                          'without real examples, such as 130 km/h, is read')
+    validate.add_argument('--values', nargs='+', metavar='KMH',
+                          help='with --leave-one-value-out: the values to hold out '
+                          '(default: every value with real crops)')
     validate.set_defaults(run=_run_validate)
     return parser
 
@@ -148,6 +174,7 @@ def _configs(args: argparse.Namespace
                                   examples_per_class=args.examples_per_class,
                                   rendered_per_kind=args.rendered_per_kind,
                                   arched_six_per_kind=args.arched_six_per_kind,
+                                  composites_per_value=args.composites_per_value,
                                   scene_copies=args.scene_copies,
                                   second_opinion=not args.no_second_opinion,
                                   real_filter_weight=args.real_filter_weight,
@@ -201,10 +228,42 @@ def _percent(value: float | None) -> str:
     return '-' if value is None else f'{100.0 * value:5.1f}%'
 
 
+def _run_value_holdout(args: argparse.Namespace) -> int:
+    classifier_config, training, detector_config = _configs(args)
+    progress = _bar(args, 'holding out values')
+    try:
+        report = leave_one_value_out(args.folders, args.folds, classifier_config, training,
+                                     progress, args.scenes, detector_config, args.backend,
+                                     args.values)
+    except ValueError as err:
+        raise SpeedSignError(str(err)) from err
+    finally:
+        progress.close()
+    print(f'leave one value out, {report["crops"]} crops: each value read by a bank '
+          'trained without any of its real crops')
+    print(f'{"value":>6} {"crops":>6} {"right":>7} {"wrong limit":>12} {"withheld":>9}   '
+          f'{"others: right":>13} {"wrong limit":>12} {"look-alikes as limit":>21}')
+    for value, row in report['values'].items():
+        held, others = row['held_out'], row['others']
+        print(f'{value:>6} {held["crops"]:>6} {_percent(held["accuracy"]):>7} '
+              f'{_percent(held["wrong_limit_rate"]):>12} {_percent(held["withheld_rate"]):>9}   '
+              f'{_percent(others["accuracy"]):>13} {_percent(others["wrong_limit_rate"]):>12} '
+              f'{_percent(others["lookalikes_read_as_limit_rate"]):>21}')
+    print(f'held-out values: mean right {report["mean_accuracy"]:.4f}, worst right '
+          f'{report["worst_accuracy"]:.4f}, worst wrong limit '
+          f'{_percent(report["worst_wrong_limit_rate"]).strip()}')
+    if args.json:
+        print(json.dumps(report, sort_keys=True))
+    return 1 if report['unreadable'] else 0
+
+
 def _run_validate(args: argparse.Namespace) -> int:
-    if args.folds < 2:
-        print('speed_sign_train validate: error: --folds must be >= 2', file=sys.stderr)
+    if args.values and not args.leave_one_value_out:
+        print('speed_sign_train validate: error: --values needs --leave-one-value-out',
+              file=sys.stderr)
         return 2
+    if args.leave_one_value_out:
+        return _run_value_holdout(args)
     classifier_config, training, detector_config = _configs(args)
     progress = _bar(args, 'validating')
     try:

@@ -69,6 +69,7 @@ from speed_sign_detector.recognition.templates import (
 from speed_sign_detector.recognition.trained_bank import NO_BANK_FILE, TrainedBank
 from speed_sign_detector.tools.image_files import UnreadableImageError, read_gray_image
 from speed_sign_detector.training.degradation import degraded, jittered
+from speed_sign_detector.training.digit_composites import digit_composites
 from speed_sign_detector.training.filter_fitting import train_real_filters
 from speed_sign_detector.training.opinion_fitting import fit_network_opinion, fit_second_opinion
 from speed_sign_detector.training.scene_examples import (
@@ -80,6 +81,7 @@ from speed_sign_detector.training.scene_examples import (
 from speed_sign_detector.training.scene_validation import cross_validate_scenes
 
 __all__ = ['MIN_LEAD_OF_MODEL', 'SECOND_OPINION_MODELS', 'LocatedCrops', 'TrainingConfig',
+           'rendered_classifier', 'scene_examples_of',
            'cross_validate', 'locate_signs', 'rendered_training_crops', 'train_bank',
            'train_from_located']
 
@@ -119,6 +121,12 @@ class TrainingConfig:
             drawn with the older lettering's arched 6 (:attr:`.templates.SignGeometry.arched_six`),
             which the real crops rarely show and the rest of the classifier reads as 8
             (like the other renderings, only where ``rendered_per_kind`` > 0).
+        composites_per_value: composite crops of every speed-limit value the package
+            knows (:data:`.templates.LIMIT_VALUES_KMH`), made from the real training crops'
+            digits (:mod:`.digit_composites`), for the second opinion and the composite
+            filters: values with no real crop (130, 140, ...) are then learned from real
+            pixels too, and every value counts as one the second opinion may choose
+            (0 = none: values without real crops are known from renderings only).
         scene_copies: degraded copies of each example cut from annotated scenes
             (:mod:`.scene_examples`).
         second_opinion: train the second opinion at all.
@@ -141,6 +149,7 @@ class TrainingConfig:
     examples_per_class: int = 0
     rendered_per_kind: int = 100
     arched_six_per_kind: int = 200
+    composites_per_value: int = 300
     scene_copies: int = 2
     second_opinion: bool = True
     real_filter_weight: float = 0.25
@@ -155,6 +164,7 @@ class TrainingConfig:
             if getattr(self, name) < 1:
                 raise ValueError(f'{name} must be >= 1, got {getattr(self, name)}')
         for name in ('augmented_copies', 'rendered_per_kind', 'arched_six_per_kind',
+                     'composites_per_value',
                      'scene_copies', 'real_filter_weight', 'real_filter_noise'):
             if getattr(self, name) < 0:
                 raise ValueError(f'{name} must be >= 0, got {getattr(self, name)}')
@@ -335,6 +345,21 @@ def train_from_located(located: LocatedCrops, config: TrainingConfig,
                 [aligned_patches(degraded(image, rng), jittered(sign, rng)[None])
                  for image, sign, ok in zip(located.images, located.signs, found) if ok]))
             patch_labels += found_labels
+        composite_labels: set[str] = set()
+        if config.composites_per_value > 0:
+            composites = digit_composites(
+                located.images, located.signs, labels,
+                [str(value) for value in LIMIT_VALUES_KMH], config.composites_per_value, rng)
+            if len(composites):
+                # each composite once as made and once as a worse camera would see it
+                patch_sets.append(np.concatenate([
+                    aligned_patches(image, sign[None])
+                    for image, sign in zip(composites.images, composites.signs)]))
+                patch_sets.append(np.concatenate([
+                    aligned_patches(degraded(image, rng), jittered(sign, rng)[None])
+                    for image, sign in zip(composites.images, composites.signs)]))
+                patch_labels += list(composites.labels) * 2
+                composite_labels = set(composites.labels)
         if rendered is not None:
             usable = np.isfinite(rendered.signs[:, 0])
             patch_sets.append(np.concatenate(
@@ -347,7 +372,7 @@ def train_from_located(located: LocatedCrops, config: TrainingConfig,
                                               weight=config.real_filter_weight)
         feature_rows = [sign_features(patch_set) for patch_set in patch_sets]
         feature_labels = list(patch_labels)
-        real_labels = set(found_labels)
+        real_labels = set(found_labels) | composite_labels
         if scenes is not None and len(scenes):
             feature_rows.append(scenes.features)
             feature_labels += scenes.labels
@@ -374,7 +399,8 @@ def train_from_located(located: LocatedCrops, config: TrainingConfig,
                        real_filters)
 
 
-def _rendered_classifier(config: ClassifierConfig) -> Classifier:
+def rendered_classifier(config: ClassifierConfig) -> Classifier:
+    """The classifier of ``config`` with the rendered filters alone (no trained bank)."""
     return Classifier(dataclasses.replace(config, bank_file=NO_BANK_FILE),
                       TrainedBank(None))
 
@@ -397,7 +423,7 @@ def locate_rendered(classifier: Classifier, config: TrainingConfig) -> LocatedCr
     return locate_signs(classifier, crops, images)  # type: ignore[arg-type]
 
 
-def _scene_examples(folders: Sequence[Path], classifier: Classifier,
+def scene_examples_of(folders: Sequence[Path], classifier: Classifier,
                     detector_config: DetectorConfig, config: TrainingConfig, backend: str
                     ) -> tuple[list[DetectedScene], SceneExamples | None]:
     """The detected scenes of ``folders`` and their examples (none without folders or a
@@ -427,9 +453,9 @@ def train_bank(folders: Sequence[Path], classifier_config: ClassifierConfig = Cl
     """
     started = time.perf_counter()
     crops, images, unreadable = read_crops(folders)
-    classifier = _rendered_classifier(classifier_config)
+    classifier = rendered_classifier(classifier_config)
     located = locate_signs(classifier, crops, images, progress)
-    _, scenes = _scene_examples(scene_folders, classifier, detector_config, config, backend)
+    _, scenes = scene_examples_of(scene_folders, classifier, detector_config, config, backend)
     provenance = {'data_folders': [str(Path(f)) for f in folders],
                   'scene_folders': [str(Path(f)) for f in scene_folders],
                   'unreadable': unreadable + list(scenes.unreadable if scenes else ()),
@@ -531,10 +557,10 @@ def cross_validate(folders: Sequence[Path], folds: int = 5,
         if progress is not None:
             progress(done, total_steps)
 
-    rendered = _rendered_classifier(classifier_config)
+    rendered = rendered_classifier(classifier_config)
     located = locate_signs(rendered, crops, images, step)
     rendered_crops = locate_rendered(rendered, config)
-    detected, scenes = _scene_examples(scene_folders, rendered, detector_config, config,
+    detected, scenes = scene_examples_of(scene_folders, rendered, detector_config, config,
                                        backend)
     answers: dict[str, list[str]] = {variant: [''] * len(crops) for variant in VARIANTS}
     for index, image in enumerate(images):
