@@ -1,4 +1,7 @@
-"""``speed_sign_synth``: write a synthetic drive as a bag, with its truth file.
+"""``speed_sign_synth``: write a synthetic drive as a bag, with its truth file; or, as
+``speed_sign_synth approach SCENES OUT``, approach sequences from real scenes
+(:mod:`speed_sign_detector.tools.synth_approach`). In both modes OUT, the first path
+given to the mode, is the bag to write (``drive_day`` below is a path, not a mode).
 
 Example::
 
@@ -14,62 +17,68 @@ of the frames written so far.
 
 The scene (road, signs, look-alikes, distractors, lighting, blur, noise) is described
 in :mod:`speed_sign_detector.synthetic`, the truth format in
-:mod:`speed_sign_detector.truth`. The same arguments give the same bag.
+:mod:`speed_sign_detector.truth`, the bag writing (shared by both modes) in
+:mod:`speed_sign_detector.tools.synthetic_bag`. The same arguments give the same bag.
 """
 from __future__ import annotations
 
 import argparse
 import logging
-import re
 import sys
-from collections.abc import Iterable
 from pathlib import Path
 
-import cv2
-import numpy as np
-
 from speed_sign_detector import __version__
-from speed_sign_detector.bag_io import (
-    BAG_FORMATS,
-    COMPRESSED_IMAGE_MSGTYPE,
-    IMAGE_MSGTYPE,
-    BagWriter,
-)
-from speed_sign_detector.errors import BagError, SpeedSignError
-from speed_sign_detector.ros.messages import build, image_message
-from speed_sign_detector.synthetic import (
-    LIGHTING_CHOICES,
-    DriveConfig,
-    SyntheticDrive,
-    SyntheticFrame,
-)
+from speed_sign_detector.bag_io import BAG_FORMATS
+from speed_sign_detector.errors import SpeedSignError
+from speed_sign_detector.synthetic import LIGHTING_CHOICES, DriveConfig, SyntheticDrive
+from speed_sign_detector.tools import synth_approach
+from speed_sign_detector.tools.cli_types import option_names
 from speed_sign_detector.tools.output_paths import (
     prepare_output_bag,
     prepare_output_file,
 )
-from speed_sign_detector.tools.progress import progress_bar
-from speed_sign_detector.truth import TruthRow, write_truth
+from speed_sign_detector.tools.synthetic_bag import DEFAULT_TOPIC, JPEG_QUALITY, write_drive
+from speed_sign_detector.truth import write_truth
+
+__all__ = ['DEFAULT_TOPIC', 'JPEG_QUALITY', 'build_parser', 'main', 'write_drive']
 
 LOGGER = logging.getLogger(__name__)
-DEFAULT_TOPIC = '/camera/image_raw'
-JPEG_QUALITY = 90
 #: Names of :class:`DriveConfig` fields in its messages -> the options that set them.
 OPTION_OF_FIELD: dict[str, str] = {'duration_s': '--duration', 'speed_mps': '--speed',
                                    'fps': '--fps', 'lighting': '--lighting',
                                    'image size': 'image size (--width x --height)'}
 #: The file name ending of a ROS 1 bag.
 ROS1_SUFFIX = '.bag'
+USAGE = ('%(prog)s [options] OUT                  (1: a synthetic drive)\n'
+         f'       %(prog)s {synth_approach.MODE} SCENES OUT [options]  (2: from real scenes)')
+HELP_DESCRIPTION = f"""\
+Two modes; in both, OUT is the output path: the bag to create.
+
+1. speed_sign_synth OUT [options]: write a deterministic synthetic drive (a 640x480
+   camera approaching speed-limit signs, look-alikes and distractors) to the bag OUT,
+   with its truth file (--truth). The options below belong to this mode.
+2. speed_sign_synth {synth_approach.MODE} SCENES OUT [options]: turn an annotated
+   scene folder SCENES (GTSDB format: images/ and gt.txt) into a bag OUT of approach
+   sequences closing in on each real speed-limit sign. Its options:
+   speed_sign_synth {synth_approach.MODE} --help.
+"""
+HELP_EPILOG = f"""\
+examples:
+  speed_sign_synth drive_day --truth drive_day.csv --seed 1 --duration 20
+      (drive_day is the output bag, not a mode)
+  speed_sign_synth {synth_approach.MODE} ../shared/data/gtsdb-dev approach_bag --truth approach.csv
+"""
 
 
 def build_parser() -> argparse.ArgumentParser:
     """Command-line arguments of ``speed_sign_synth``."""
     parser = argparse.ArgumentParser(
-        prog='speed_sign_synth',
-        description='Write a deterministic synthetic drive (640x480 camera approaching '
-        'speed-limit signs, look-alikes and distractors) as a bag, with its truth file.')
+        prog='speed_sign_synth', usage=USAGE, description=HELP_DESCRIPTION,
+        epilog=HELP_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--version', action='version', version=f'%(prog)s {__version__}')
-    parser.add_argument('out_bag', type=Path, help='bag to create (a folder for ROS 2, a '
-                        '.bag file for ROS 1: .bag is added when missing); must not exist')
+    parser.add_argument('out_bag', type=Path, metavar='OUT', help='output path: the bag to '
+                        'create (a folder for ROS 2, a .bag file for ROS 1: .bag is added '
+                        'when missing); must not exist')
     parser.add_argument('--truth', type=Path, help='write the truth CSV here (replaced '
                         'when it exists)')
     parser.add_argument('--seed', type=int, default=0, help='random seed (default 0)')
@@ -98,63 +107,11 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def write_drive(frames: Iterable[SyntheticFrame], out_bag: Path, bag_format: str = 'mcap',
-                compressed: bool = False, topic: str | None = None,
-                progress: bool = False) -> list[TruthRow]:
-    """Write frames (a :class:`SyntheticDrive`, or frames rendered before) into a new bag.
-
-    Args:
-        frames: the frames, in order (a drive renders them while they are written).
-        out_bag: the bag to create.
-        bag_format: one of :data:`speed_sign_detector.bag_io.BAG_FORMATS`.
-        compressed: JPEG CompressedImage messages instead of raw ``bgr8`` Images.
-        topic: image topic name (default :data:`DEFAULT_TOPIC`, ``.../compressed``).
-        progress: show a progress bar on stderr (when it is a terminal).
-
-    Returns:
-        The truth rows of the whole drive, in frame order.
-
-    Raises:
-        BagError: the bag cannot be created or written.
-    """
-    topic = topic or (f'{DEFAULT_TOPIC}/compressed' if compressed else DEFAULT_TOPIC)
-    rows: list[TruthRow] = []
-    with BagWriter(out_bag, bag_format) as writer:
-        msgtype = COMPRESSED_IMAGE_MSGTYPE if compressed else IMAGE_MSGTYPE
-        writer.add_topic(topic, msgtype)
-        message_class = writer.message_class(msgtype)
-        total = frames.frame_count if isinstance(frames, SyntheticDrive) else None
-        bar = progress_bar(total, 'frames', 'frame', enabled=progress)
-        for frame in frames:
-            header = writer.header(frame.stamp_ns, frame_id='camera')
-            if compressed:
-                ok, encoded = cv2.imencode('.jpg', frame.bgr,
-                                           [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
-                if not ok:
-                    raise BagError(f'JPEG encoding of frame {frame.index} failed')
-                message = build(message_class, header=header, format='bgr8; jpeg compressed bgr8',
-                                data=np.asarray(encoded, np.uint8).reshape(-1))
-            else:
-                message = image_message(frame.bgr, header, image_class=message_class)
-            writer.write(topic, frame.stamp_ns, message)
-            rows.extend(frame.truth)
-            bar.update(1)
-        bar.close()
-    return rows
-
-
 def bag_path_for_format(out_bag: Path, bag_format: str) -> Path:
     """The bag path to write: for ROS 1, ``.bag`` added when missing."""
     if bag_format == 'ros1' and out_bag.suffix != ROS1_SUFFIX:
         return out_bag.with_name(out_bag.name + ROS1_SUFFIX)
     return out_bag
-
-
-def option_names(message: str) -> str:
-    """A :class:`DriveConfig` message with its field names replaced by the options."""
-    for field_name, option in OPTION_OF_FIELD.items():
-        message = re.sub(rf'\b{re.escape(field_name)}\b', option, message)
-    return message
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -164,8 +121,7 @@ def main(argv: list[str] | None = None) -> int:
     real scenes instead (:mod:`speed_sign_detector.tools.synth_approach`).
     """
     argv = sys.argv[1:] if argv is None else argv
-    if argv[:1] == ['approach']:
-        from speed_sign_detector.tools import synth_approach
+    if argv[:1] == [synth_approach.MODE]:
         return synth_approach.main(argv[1:])
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO, format='%(levelname)s %(name)s: %(message)s',
@@ -176,7 +132,8 @@ def main(argv: list[str] | None = None) -> int:
                              height_px=args.height, speed_mps=args.speed,
                              distractors=not args.no_distractors)
     except ValueError as err:
-        print(f'speed_sign_synth: error: {option_names(str(err))}', file=sys.stderr)
+        print(f'speed_sign_synth: error: {option_names(str(err), OPTION_OF_FIELD)}',
+              file=sys.stderr)
         return 2
     out_bag = args.out_bag
     try:

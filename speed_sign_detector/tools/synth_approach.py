@@ -30,11 +30,24 @@ from speed_sign_detector.approach_sequences import (
 from speed_sign_detector.bag_io import BAG_FORMATS
 from speed_sign_detector.errors import SpeedSignError
 from speed_sign_detector.synthetic import SyntheticFrame
+from speed_sign_detector.tools.cli_types import (
+    non_negative_integer,
+    non_negative_number,
+    option_names,
+)
 from speed_sign_detector.tools.progress import progress_bar
-from speed_sign_detector.tools.synth import write_drive
+from speed_sign_detector.tools.synthetic_bag import write_drive
 from speed_sign_detector.truth import write_truth
 
 LOGGER = logging.getLogger(__name__)
+#: The first argument of ``speed_sign_synth`` that selects this mode.
+MODE = 'approach'
+#: Names of :class:`ApproachConfig` fields in its messages -> the options that set them.
+OPTION_OF_FIELD: dict[str, str] = {
+    'frames_per_sequence': '--frames', 'gap_frames': '--gap-frames', 'fps': '--fps',
+    'output size': 'output size (--width x --height)', 'growth_min': '--growth MIN',
+    'growth_max': '--growth MAX', 'min_sign_px': '--min-sign-px',
+    'max_sequences': '--max-sequences'}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -45,13 +58,15 @@ def build_parser() -> argparse.ArgumentParser:
         description='Turn an annotated scene folder (GTSDB format: images/ and gt.txt) '
         'into a bag of approach sequences (the view closing in on each speed-limit sign, '
         'resampled from the real pixels, with sign-free gaps) and its truth CSV.')
-    parser.add_argument('scenes_dir', type=Path, help='GTSDB-format folder (images/, gt.txt)')
-    parser.add_argument('out_bag', type=Path, help='bag to create (a directory for ROS 2, '
-                        'a .bag file for ROS 1); must not exist')
+    parser.add_argument('scenes_dir', type=Path, metavar='SCENES',
+                        help='input: GTSDB-format folder (images/, gt.txt)')
+    parser.add_argument('out_bag', type=Path, metavar='OUT', help='output path: the bag '
+                        'to create (a directory for ROS 2, a .bag file for ROS 1); must '
+                        'not exist')
     parser.add_argument('--truth', type=Path, help='write the truth CSV here')
     parser.add_argument('--scenes', action='append', default=[], metavar='FILE[,FILE...]',
                         help='only these image files of gt.txt (repeatable, comma-separated)')
-    parser.add_argument('--max-sequences', type=int, default=0,
+    parser.add_argument('--max-sequences', type=non_negative_integer, default=0,
                         help='stop after this many sequences (default: all)')
     parser.add_argument('--frames', type=int, default=defaults.frames_per_sequence,
                         help=f'frames per approach (default {defaults.frames_per_sequence})')
@@ -60,7 +75,8 @@ def build_parser() -> argparse.ArgumentParser:
                         f'{defaults.gap_frames})')
     parser.add_argument('--fps', type=float, default=defaults.fps,
                         help=f'frame rate (default {defaults.fps:g})')
-    parser.add_argument('--min-sign-px', type=float, default=defaults.min_sign_px,
+    parser.add_argument('--min-sign-px', type=non_negative_number,
+                        default=defaults.min_sign_px,
                         help=f'smallest sign approached, mean of box width and height '
                         f'(default {defaults.min_sign_px:g})')
     parser.add_argument('--growth', type=float, nargs=2, metavar=('MIN', 'MAX'),
@@ -94,7 +110,8 @@ def main(argv: list[str] | None = None) -> int:
                                 growth_max=args.growth[1], seed=args.seed, scenes=scenes,
                                 max_sequences=args.max_sequences)
     except ApproachSceneError as err:
-        print(f'speed_sign_synth approach: error: {err}', file=sys.stderr)
+        print(f'speed_sign_synth approach: error: {option_names(str(err), OPTION_OF_FIELD)}',
+              file=sys.stderr)
         return 2
     written = 0
     try:
