@@ -125,3 +125,29 @@ def test_late_frames_sent_in_bursts_are_not_losses() -> None:
     lost, period_s = estimate(stamps)
     assert lost == 0
     assert period_s == pytest.approx(PERIOD_NS * 1e-9, rel=0.1)
+
+
+@pytest.mark.parametrize('late_by_periods', [1, 2, 28])
+def test_a_first_frame_sent_before_the_match_is_not_a_loss(late_by_periods: int) -> None:
+    """The start-up of a replay or camera: the first frame that arrives was sent before
+    the subscription matched (``late_by_periods`` periods before the next one to arrive,
+    the frames in between never came); then a steady stream. No loss; a skipped frame
+    later in the same stream still counts."""
+    steady = jittered(list(range(1, 120)), 3_000_000, seed=7)
+    first = steady[0] - (late_by_periods + 1) * PERIOD_NS
+    lost, period_s = estimate([first, *steady])
+    assert lost == 0
+    assert period_s == pytest.approx(PERIOD_NS * 1e-9, rel=0.1)
+    skipped_later = [first, *steady[:60], *steady[61:]]
+    assert estimate(skipped_later)[0] == 1
+
+
+def test_the_first_gaps_after_a_restart_are_start_up_too() -> None:
+    """A looped bag starts again (stamps jump back): its first frame came late as well."""
+    first_pass = [1_000_000_000 + index * PERIOD_NS for index in range(60)]
+    second_pass = [1_000_000_000 + index * PERIOD_NS for index in (0, *range(4, 60))]
+    monitor = TransportLossMonitor()
+    for stamp in [*first_pass, *second_pass]:
+        monitor.add('/camera/image_raw', stamp)
+    assert monitor.totals().frames_lost == 0
+    assert monitor.totals().frames_received == len(first_pass) + len(second_pass)

@@ -24,7 +24,13 @@ for one that loses frames:
 
 Gaps of zero (the same stamp twice), stamps going back (a restarted source or a looped
 bag) and gaps longer than ``pause_s`` (a source that paused) are not losses: a jump
-back or a pause restarts the estimate. A source that stamps frames when it publishes
+back or a pause restarts the estimate. Nor are the first gaps of a stream (the first
+:data:`MIN_GAPS_FOR_PERIOD`, after the start or a restart): while the subscription and
+the publisher are still matching, the first frame that arrives may be one sent before
+the match, delivered late by a reliable publisher (``speed_sign_replay`` stamps its
+first frame, waits for it to be acknowledged, then plays on), and the frames sent in
+between never arrive: start-up, not transport loss. A gap counts only against a period
+established before it. A source that stamps frames when it publishes
 them (a replay with ``--restamp``, some drivers) and is starved of CPU sends late
 frames in bursts: a long gap followed by very short ones. The short ("burst") gaps are
 left out of the period estimate, and each repays one frame of an apparent loss among
@@ -39,7 +45,8 @@ from dataclasses import dataclass
 
 #: Gaps shorter than this factor times the smallest gap of a window count as one period.
 SINGLE_PERIOD_FACTOR = 1.5
-#: Earlier gaps needed before they give a period of their own.
+#: Earlier gaps needed before they give a period of their own; a gap with fewer before
+#: it (the start of a stream) counts no loss.
 MIN_GAPS_FOR_PERIOD = 3
 #: Periods before and after a gap closer than this fraction are the same rate.
 SAME_PERIOD_TOLERANCE = 0.15
@@ -167,12 +174,15 @@ def lost_in_gap(gap_ns: int, earlier_ns: list[int], later_ns: list[int]) -> int:
     """Frames lost in a gap, judged against the periods before and after it (see module);
     -1 for a burst gap (a frame that came early: it repays an apparent loss just before).
 
-    With fewer than :data:`MIN_GAPS_FOR_PERIOD` earlier gaps (a stream that just began)
-    the period after the gap stands for both; with no later gap yet (the newest gap),
-    the period before it does. When both periods agree (within
-    :data:`SAME_PERIOD_TOLERANCE`), their gaps are pooled for one, finer estimate.
+    With fewer than :data:`MIN_GAPS_FOR_PERIOD` earlier gaps (a stream that just began:
+    its first frames may have been sent before the subscription matched) nothing is
+    counted; with no later gap yet (the newest gap), the period before it stands for
+    both. When both periods agree (within :data:`SAME_PERIOD_TOLERANCE`), their gaps are
+    pooled for one, finer estimate.
     """
-    before = period_from_gaps(earlier_ns) if len(earlier_ns) >= MIN_GAPS_FOR_PERIOD else None
+    if len(earlier_ns) < MIN_GAPS_FOR_PERIOD:
+        return 0   # start-up: no period established before this gap
+    before = period_from_gaps(earlier_ns)
     after = period_from_gaps([gap_ns, *later_ns]) if later_ns else None
     before, after = before or after, after or before
     if before is None or after is None:
