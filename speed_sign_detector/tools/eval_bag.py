@@ -99,6 +99,7 @@ from speed_sign_detector.config import PipelineConfig, load_yaml
 from speed_sign_detector.errors import ImageConversionError, SpeedSignError
 from speed_sign_detector.limit_in_force import score_time_in_limit
 from speed_sign_detector.recognition.classifier import LABEL_END_OF_LIMIT
+from speed_sign_detector.tools.cli_types import non_negative_number
 from speed_sign_detector.tools.output_paths import (
     prepare_output_bag,
     prepare_output_file,
@@ -665,7 +666,7 @@ def add_pipeline_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--config', type=Path, help='parameter YAML file of the node')
     parser.add_argument('--backend', choices=('auto', 'gl', 'numpy'),
                         help='voting backend (overrides --config)')
-    parser.add_argument('--grace', type=float, default=DEFAULT_GRACE_S,
+    parser.add_argument('--grace', type=non_negative_number, default=DEFAULT_GRACE_S,
                         help=f'seconds after a sign leaves the image within which '
                         f'recognizing it still counts (default {DEFAULT_GRACE_S:g})')
 
