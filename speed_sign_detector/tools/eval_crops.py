@@ -57,6 +57,7 @@ from speed_sign_detector.labelled_crops import (
 )
 from speed_sign_detector.recognition.classifier import Classification, Classifier
 from speed_sign_detector.recognition.crop_framing import CROP_FRAMINGS
+from speed_sign_detector.tools.cli_types import non_negative_integer, positive_integer
 from speed_sign_detector.tools.image_files import (
     UnreadableImage,
     UnreadableImageError,
@@ -382,9 +383,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         'sign), padded (10%%, no least margin), auto (any)')
     parser.add_argument('--json', action='store_true', help='print one JSON object as the '
                         'last line on stdout (instead of the summary)')
-    parser.add_argument('--limit', type=int, default=0,
+    parser.add_argument('--limit', type=non_negative_integer, default=0,
                         help='evaluate at most N crops (default 0 = all)')
-    parser.add_argument('--every', type=int, default=1,
+    parser.add_argument('--every', type=positive_integer, default=1,
                         help='evaluate every Nth listed crop (default 1 = all)')
     parser.add_argument('-q', '--quiet', action='store_true', help='no progress on stderr')
     parser.set_defaults(run=run)

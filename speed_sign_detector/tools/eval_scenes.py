@@ -33,7 +33,7 @@ import sys
 import time
 from pathlib import Path
 
-from speed_sign_detector.config import PipelineConfig, load_yaml
+from speed_sign_detector.config import PipelineConfig, load_yaml, parameter_specs
 from speed_sign_detector.detection.detector import Detector
 from speed_sign_detector.errors import InvalidFrameError, TruthFileError
 from speed_sign_detector.recognition.classifier import Classification, Classifier
@@ -44,6 +44,7 @@ from speed_sign_detector.scene_truth import (
     read_gtsdb_truth,
     scene_image_files,
 )
+from speed_sign_detector.tools.cli_types import integer_in_range, non_negative_integer
 from speed_sign_detector.tools.image_files import (
     UnreadableImage,
     UnreadableImageError,
@@ -58,6 +59,10 @@ from speed_sign_detector.tools.run_control import (
 #: Radius ranges (pixels) of the per-size recall figures.
 SIZE_BINS_PX: tuple[tuple[float, float], ...] = ((0.0, 8.0), (8.0, 12.0), (12.0, 20.0),
                                                  (20.0, 1000.0))
+#: Allowed --max-candidates: the range of detector.max_candidates.
+MAX_CANDIDATES_RANGE: tuple[int, int] = next(
+    (int(spec.low), int(spec.high)) for spec in parameter_specs()
+    if spec.name == 'detector.max_candidates')
 #: What ``scenes --help`` says (the module docstring is for the API documentation).
 HELP_DESCRIPTION = """\
 Detection and single-frame recognition metrics on GTSDB-format scenes.
@@ -96,9 +101,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help='ROS 2 parameter YAML file of the node')
     parser.add_argument('--no-classify', action='store_true',
                         help='detection metrics only (no classifier)')
-    parser.add_argument('--max-candidates', type=int, default=None,
+    parser.add_argument('--max-candidates', type=integer_in_range(*MAX_CANDIDATES_RANGE),
+                        default=None,
                         help='top-N candidates per frame (default: the config, 7)')
-    parser.add_argument('--limit', type=int, default=0,
+    parser.add_argument('--limit', type=non_negative_integer, default=0,
                         help='evaluate only the first N images (default 0 = all)')
     parser.add_argument('-q', '--quiet', action='store_true', help='no progress on stderr')
     parser.set_defaults(run=run)

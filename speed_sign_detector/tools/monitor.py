@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 from collections import deque
@@ -36,6 +37,7 @@ from typing import Any
 
 from speed_sign_detector import __version__
 from speed_sign_detector.ros.messages import pointcloud_to_array
+from speed_sign_detector.tools.cli_types import positive_number
 
 #: Diagnostics values copied into the snapshot (key in the node's status -> snapshot field).
 DIAGNOSTIC_FIELDS: dict[str, str] = {
@@ -107,7 +109,8 @@ class MonitorSnapshot:
     def status_line(self) -> str:
         """One line for a terminal."""
         def show(value: Any, fmt: str = '{}') -> str:
-            return '-' if value is None else fmt.format(value)
+            unknown = value is None or (isinstance(value, float) and math.isnan(value))
+            return '-' if unknown else fmt.format(value)
 
         limit = ('none' if self.active_limit_kmh == 0 else
                  show(self.active_limit_kmh, '{} km/h'))
@@ -223,12 +226,15 @@ class _Monitor:
 
 
 def _parse(text: str) -> Any:
-    """Diagnostic values are strings: ints and floats are returned as numbers."""
+    """Diagnostic values are strings: ints and floats are returned as numbers, and
+    ``nan`` (the node's "no value yet", e.g. a latency before the first frame) as None,
+    shown ``-`` like a field not heard yet (and ``null`` in JSON)."""
     for kind in (int, float):
         try:
-            return kind(text)
+            value = kind(text)
         except ValueError:
             continue
+        return None if isinstance(value, float) and math.isnan(value) else value
     return text
 
 
@@ -242,12 +248,12 @@ def build_parser() -> argparse.ArgumentParser:
                         help='print one snapshot (after hearing every topic, or at the '
                         'timeout) and exit')
     parser.add_argument('--json', action='store_true', help='print snapshots as JSON')
-    parser.add_argument('--timeout', type=float, default=10.0,
+    parser.add_argument('--timeout', type=positive_number, default=10.0,
                         help='give up when nothing is published for this many seconds '
                         '(default 10)')
     parser.add_argument('--status', help='name of the /diagnostics status to show (default: '
                         'the one with frames_processed)')
-    parser.add_argument('--interval', type=float, default=0.5,
+    parser.add_argument('--interval', type=positive_number, default=0.5,
                         help='seconds between refreshes of the status line on a terminal '
                         '(default 0.5)')
     return parser

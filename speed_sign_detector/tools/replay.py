@@ -38,6 +38,11 @@ from speed_sign_detector.bag_io import (
     header_stamp_ns,
 )
 from speed_sign_detector.errors import BagError, SpeedSignError
+from speed_sign_detector.tools.cli_types import (
+    non_negative_number,
+    positive_integer,
+    positive_number,
+)
 
 #: After a subscriber appears, how long the publisher waits for the subscriber's side of
 #: discovery before the first message, seconds.
@@ -58,16 +63,16 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--topic', help='image topic of the bag (needed when it has several)')
     parser.add_argument('--publish-as', help='publish under this topic name instead of the '
                         'recorded one')
-    parser.add_argument('--rate', type=float, default=1.0,
+    parser.add_argument('--rate', type=positive_number, default=1.0,
                         help='playback speed factor (default 1.0 = recorded timing)')
     parser.add_argument('--loop', action='store_true', help='start again at the end')
     parser.add_argument('--restamp', action='store_true',
                         help='set header stamps to the time each message is due (the '
                         'recorded timing from now on, like a camera\'s capture times: a '
                         'message published late shows as latency, not as a stamp gap)')
-    parser.add_argument('--wait', type=float, default=5.0,
+    parser.add_argument('--wait', type=non_negative_number, default=5.0,
                         help='seconds to wait for a subscriber before playing (default 5)')
-    parser.add_argument('--depth', type=int, default=5,
+    parser.add_argument('--depth', type=positive_integer, default=5,
                         help='publisher queue depth (default 5)')
     parser.add_argument('--best-effort', action='store_true',
                         help='best-effort QoS (sensor data) instead of reliable')
@@ -82,9 +87,6 @@ def main(argv: list[str] | None = None) -> int:
 
     argv = list(sys.argv[1:] if argv is None else argv)
     args = build_parser().parse_args(remove_ros_args(['speed_sign_replay', *argv])[1:])
-    if args.rate <= 0.0:
-        print('speed_sign_replay: error: --rate must be positive', file=sys.stderr)
-        return 2
     try:
         bag = BagReader(args.bag)
         topic = bag.image_topic(args.topic)
