@@ -7,7 +7,6 @@ thread with the real pipeline (GL on llvmpipe here, numpy where there is no GL).
 """
 from __future__ import annotations
 
-import os
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -32,7 +31,7 @@ from rclpy.qos import (
     qos_profile_sensor_data,
 )
 from process_helpers import CLASSIFIER_WORKER, child_processes
-from ros_spin import spinning
+from ros_spin import module_domain, ros_domain_environment, spinning
 from scene_helpers import approach_frames, textured_background
 from sensor_msgs.msg import CompressedImage, Image, PointCloud2
 from std_msgs.msg import Header, UInt16
@@ -49,7 +48,7 @@ from speed_sign_detector.ros.node import (
     default_parameter_file,
 )
 
-DOMAIN_ID = 87
+DOMAIN_ID = module_domain('test_node')
 WAIT_S = 60.0
 WIDTH, HEIGHT = 320, 240
 pytestmark = pytest.mark.ros
@@ -116,20 +115,20 @@ def stamp_ns(msg: Any) -> int:
 @pytest.fixture(scope='module', params=[True, False], ids=['overlapped', 'serial'])
 def ros(request: pytest.FixtureRequest) -> Iterator[tuple[SpeedSignDetectorNode, Probe]]:
     """The node (recognition overlapping detection, or all on the worker) and a probe."""
-    os.environ['ROS_DOMAIN_ID'] = str(DOMAIN_ID)
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=DOMAIN_ID)
-    # filter banks are built once and cached across test runs (pytest's cache folder)
-    bank_cache = request.config.cache.mkdir('speed_sign_classifier_banks')
-    node = SpeedSignDetectorNode(context=context, parameter_overrides=[
-        Parameter('classifier.cache_dir', value=str(bank_cache)),
-        Parameter('overlap_stages', value=request.param)])
-    probe = Probe(context=context)
-    with spinning(context, node, probe):
-        wait_for(lambda: probe.image_pub.get_subscription_count() > 0
-                 and probe.compressed_pub.get_subscription_count() > 0
-                 and node.count_subscribers('candidates') > 0, 'discovery')
-        yield node, probe
+    with ros_domain_environment(DOMAIN_ID):
+        context = rclpy.Context()
+        rclpy.init(context=context, domain_id=DOMAIN_ID)
+        # filter banks are built once and cached across test runs (pytest's cache folder)
+        bank_cache = request.config.cache.mkdir('speed_sign_classifier_banks')
+        node = SpeedSignDetectorNode(context=context, parameter_overrides=[
+            Parameter('classifier.cache_dir', value=str(bank_cache)),
+            Parameter('overlap_stages', value=request.param)])
+        probe = Probe(context=context)
+        with spinning(context, node, probe):
+            wait_for(lambda: probe.image_pub.get_subscription_count() > 0
+                     and probe.compressed_pub.get_subscription_count() > 0
+                     and node.count_subscribers('candidates') > 0, 'discovery')
+            yield node, probe
 
 
 def send_and_wait(probe: Probe, msg: Any, publisher: Any) -> PointCloud2:
@@ -147,6 +146,44 @@ def send_and_wait(probe: Probe, msg: Any, publisher: Any) -> PointCloud2:
         except pytest.fail.Exception:
             continue
     pytest.fail(f'no candidates for the frame stamped {sent}')
+
+
+def frame_counters(node: SpeedSignDetectorNode) -> dict[str, int]:
+    """The node's frame counters now: received, processed, dropped_stale, rejected."""
+    stats = node._stats
+    with stats.lock:
+        return {'received': stats.received, 'processed': stats.processed,
+                'dropped_stale': stats.dropped_stale, 'rejected': stats.rejected}
+
+
+def settled_counters(node: SpeedSignDetectorNode) -> dict[str, int]:
+    """Wait until every frame the node received is processed, dropped or rejected
+    (none waiting or in flight); returns the counters then."""
+    def settled() -> dict[str, int] | None:
+        counters = frame_counters(node)
+        done = counters['processed'] + counters['dropped_stale'] + counters['rejected']
+        return counters if done == counters['received'] else None
+    return wait_for(settled, 'every received frame to be processed, dropped or rejected')
+
+
+def publish_until(probe: Probe, msg: Any, publisher: Any, condition: Callable[[], Any],
+                  what: str, new_stamp: bool = True) -> int:
+    """Publish ``msg`` (with a new header stamp each time when ``new_stamp``) until
+    ``condition()`` holds, waiting 5 s between sends (best effort may lose a sample);
+    fail naming ``what`` after WAIT_S. Returns the number of sends."""
+    deadline = time.monotonic() + WAIT_S
+    sends = 0
+    while time.monotonic() < deadline:
+        if new_stamp:
+            probe.next_header_stamp(msg)
+        publisher.publish(msg)
+        sends += 1
+        try:
+            wait_for(condition, what, timeout_s=5.0)
+            return sends
+        except pytest.fail.Exception:
+            continue
+    pytest.fail(f'timed out after {WAIT_S:.0f} s waiting for {what}')
 
 
 def latest_status(probe: Probe, key_filter: Callable[[dict[str, Any]], bool]
@@ -276,9 +313,13 @@ def test_bad_frames_are_counted_and_the_node_keeps_running(ros: tuple) -> None:
     bad_jpeg = CompressedImage(format='jpeg', data=b'\xff\xd8\xff\xe0 this is no jpeg')
     for bad, publisher in ((unknown, probe.image_pub), (truncated, probe.image_pub),
                            (bad_jpeg, probe.compressed_pub)):
-        probe.next_header_stamp(bad)
-        publisher.publish(bad)
-        time.sleep(0.3)  # let each be taken alone (not replaced by the next one)
+        # each is taken alone (not replaced by the next one): the next is sent once the
+        # worker has rejected this one
+        rejected = frame_counters(node)['rejected']
+        publish_until(probe, bad, publisher,
+                      lambda: frame_counters(node)['rejected'] > rejected,  # noqa: B023
+                      f'the node to reject the {bad.__class__.__name__} '
+                      f'{getattr(bad, "encoding", "jpeg")!r}')
     send_and_wait(probe, good, probe.image_pub)
     values = latest_status(
         probe, lambda v: int(v['frames_rejected_bad_input']) >= rejected_before + 3)
@@ -298,21 +339,68 @@ def test_silence_turns_the_status_to_warn(ros: tuple) -> None:
         call_set_parameters(probe, parameter('no_image_warning_s', 5.0))
 
 
-def test_burst_keeps_only_the_newest_frame(ros: tuple) -> None:
+BURST_FRAMES = 30
+
+
+def test_burst_keeps_only_the_newest_frame(ros: tuple, monkeypatch: pytest.MonkeyPatch
+                                           ) -> None:
+    """A burst arrives while the worker is held on one frame: once free, the worker
+    processes the newest frame of the burst and no other; every older one that reached the
+    node is dropped as stale and never published."""
     node, probe = ros
+    held = threading.Event()
+    release = threading.Event()
+    process = node._process
+
+    def process_holding_the_first(stages: Any, frame: Any) -> None:
+        if not held.is_set():
+            held.set()
+            release.wait(WAIT_S)
+        process(stages, frame)
+
+    arrived: list[int] = []  # stamps of the images that reached the node, in order
+    on_image = node._image_sub.callback
+
+    def note_arrival(msg: Image) -> None:
+        arrived.append(stamp_ns(msg))
+        on_image(msg)
+
     frame = textured_background(4)
-    stamps = []
-    for _ in range(30):
-        msg = image_message(frame, Header(), image_class=Image)
-        stamps.append(probe.next_header_stamp(msg))
-        probe.image_pub.publish(msg)
-    # the last frame is never replaced, so it is processed; older ones may be dropped
-    wait_for(lambda: any(stamp_ns(c) == stamps[-1] for c in list(probe.candidates)),
-             'the newest frame of the burst')
-    values = latest_status(
-        probe, lambda v: int(v['frames_received']) == int(v['frames_processed'])
-        + int(v['frames_dropped']))
-    assert int(values['frames_received']) > 0
+    holder = image_message(frame, Header(), image_class=Image)
+    burst = [image_message(frame, Header(), image_class=Image) for _ in range(BURST_FRAMES)]
+    stamps = [probe.next_header_stamp(msg) for msg in burst]
+    newest = stamps[-1]
+    before = settled_counters(node)
+    monkeypatch.setattr(node._image_sub, 'callback', note_arrival)
+    monkeypatch.setattr(node, '_process', process_holding_the_first)
+    try:
+        publish_until(probe, holder, probe.image_pub, held.is_set,
+                      'the worker to take a frame')
+        for msg in burst[:-1]:
+            probe.image_pub.publish(msg)
+        # the burst's newest frame reaches the node (sent again if it was lost)
+        publish_until(probe, burst[-1], probe.image_pub, lambda: newest in arrived,
+                      'the newest frame of the burst to reach the node', new_stamp=False)
+    finally:
+        release.set()
+    wait_for(lambda: any(stamp_ns(c) == newest for c in list(probe.candidates)),
+             'the candidates of the newest frame of the burst')
+    after = settled_counters(node)
+    with probe.lock:
+        published = [stamp_ns(cloud) for cloud in probe.candidates
+                     if stamp_ns(cloud) in stamps]
+    assert published == [newest], 'frames of the burst published (their places in it): ' \
+        f'{[stamps.index(stamp) for stamp in published]}, expected only the newest ' \
+        f'({BURST_FRAMES - 1})'
+    older = {stamp for stamp in arrived if stamp in stamps and stamp != newest}
+    assert older, 'no older frame of the burst reached the node (nothing to drop)'
+    # every arrival counted; the held frame and the burst's newest processed; every
+    # other arrival replaced while it waited, none rejected
+    received = after['received'] - before['received']
+    assert received == len(arrived)
+    assert after['processed'] - before['processed'] == 2
+    assert after['rejected'] == before['rejected']
+    assert after['dropped_stale'] - before['dropped_stale'] == received - 2
 
 
 def call_set_parameters(probe: Probe, *parameters: ParameterMsg) -> list[Any]:
