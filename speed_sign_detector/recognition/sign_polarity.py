@@ -38,7 +38,7 @@ DIGIT_BOX = (0.45, 0.28)
 #: 0.66-0.97, the lamps of an electronic one about 0.76-0.95).
 RING_RADII = (0.74, 0.95)
 #: Least contrast of the ring over the face, gray levels (the digit box needs half).
-MIN_CONTRAST = 20.0
+MIN_CONTRAST = 15.0
 
 
 @functools.lru_cache(maxsize=4)

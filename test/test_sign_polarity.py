@@ -1,0 +1,82 @@
+"""The polarity test tells signs lit on a dark face (LED) from painted ones, and the
+classifier reads an LED sign as its value or withholds it, never as another value."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from speed_sign_detector.config import ClassifierConfig
+from speed_sign_detector.recognition.classifier import Classifier
+from speed_sign_detector.recognition.sign_designs import LedLook, design_gray, lit_on_dark_design
+from speed_sign_detector.recognition.sign_polarity import is_lit_on_dark, polarity_measures
+
+DESIGNS = ('painted', 'yellow', 'led', 'led_amber', 'led_dot_matrix', 'led_dark_on_lit')
+LOOKS = (LedLook(glow=0.0), LedLook(glow=0.8, exposure=1.7))
+
+
+def _crop(kind: str, design: str, diameter: int, background: float,
+          look: LedLook = LedLook()) -> np.ndarray:
+    """A GTSRB-framed uint8 crop of one sign on a uniform background, slightly blurred."""
+    import cv2
+
+    side = diameter + 2 * max(5, round(0.1 * diameter))
+    scene = design_gray(kind, diameter, design, np.full((side, side), background), look)
+    return np.clip(cv2.GaussianBlur(scene, (0, 0), 0.6), 0, 255).astype(np.uint8)
+
+
+@pytest.fixture(scope='module')
+def classifier(tmp_path_factory: pytest.TempPathFactory) -> Classifier:
+    cache: Path = tmp_path_factory.mktemp('filter_banks')
+    return Classifier(ClassifierConfig(max_radius_px=30.0, cache_dir=str(cache)))
+
+
+@pytest.mark.parametrize('design', DESIGNS)
+def test_polarity_tells_led_from_painted_signs(design: str) -> None:
+    wrong = []
+    for kind in ('30', '80', '120', '140'):
+        for diameter in (16, 40):
+            for background in (30.0, 220.0):
+                for look in LOOKS:
+                    crop = _crop(kind, design, diameter, background, look)
+                    centre = crop.shape[0] / 2.0
+                    found = is_lit_on_dark(crop, centre, centre, diameter / 2.0)
+                    expected = lit_on_dark_design(design)
+                    if found != expected:
+                        wrong.append((kind, diameter, background, look,
+                                      polarity_measures(crop, centre, centre, diameter / 2.0)))
+    assert not wrong, wrong
+
+
+def test_flat_and_unusable_windows_are_not_lit_on_dark() -> None:
+    flat = np.full((40, 40), 90, np.uint8)
+    assert not is_lit_on_dark(flat, 20.0, 20.0, 15.0)
+    assert not is_lit_on_dark(flat, 20.0, 20.0, 0.0)
+    assert not is_lit_on_dark(flat, float('nan'), 20.0, 15.0)
+
+
+@pytest.mark.parametrize('design', ['led', 'led_amber', 'led_dot_matrix'])
+def test_led_signs_are_read_inverted_as_their_value_or_withheld(
+        classifier: Classifier, design: str) -> None:
+    wrong, right = [], []
+    for value in ('30', '50', '80', '100'):
+        for diameter in (24, 36, 50):
+            crop = _crop(value, design, diameter, 25.0)
+            evidence = classifier.crop_evidence(crop)
+            assert getattr(evidence, 'inverted', True), (value, diameter)
+            answer = classifier.classify_crop(crop)
+            if answer.is_limit and answer.label != value:
+                wrong.append((value, diameter, answer.label))
+            right.append(answer.label == value)
+    assert not wrong, wrong
+    # read, not only withheld: the inverted patch is read like a painted sign
+    assert sum(right) >= 0.75 * len(right), right
+
+
+def test_painted_signs_are_not_inverted(classifier: Classifier) -> None:
+    for value in ('30', '80', '120'):
+        crop = _crop(value, 'painted', 36, 120.0)
+        evidence = classifier.crop_evidence(crop)
+        assert not getattr(evidence, 'inverted', False)
+        assert classifier.classify_crop(crop).label == value
