@@ -24,23 +24,25 @@ from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, SetParameters
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
-from ros_spin import spinning
+from ros_spin import module_domain, spinning
 from scene_helpers import approach_frames
 from sensor_msgs.msg import Image, PointCloud2
 from std_msgs.msg import Header
 
+from speed_sign_detector.bag_io import BagReader
 from speed_sign_detector.config import load_yaml, to_parameters
-from speed_sign_detector.ros.messages import image_message
+from speed_sign_detector.ros.messages import image_message, pointcloud_to_array
 from speed_sign_detector.synthetic import DriveConfig, SyntheticDrive
 from speed_sign_detector.tools.synth import write_drive
 
-DOMAIN_ID = 93
+DOMAIN_ID = module_domain('test_node_cli')
 WAIT_S = 120.0
 CAMERA_TOPIC = '/cli_cam/image_raw'
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 #: A user's parameter file: integers where floats are declared, floats, nested and
-#: dotted keys, a node option.
+#: dotted keys, a node option; fewer candidates per frame than the default (7), which
+#: shows in the outputs.
 USER_YAML = """\
 speed_sign_detector:
   ros__parameters:
@@ -49,6 +51,7 @@ speed_sign_detector:
       min_radius_px: 4
       max_radius_px: 50
       gradient_threshold: 55.5
+      max_candidates: 2
     tracker.window_s: 2
     classifier:
       psr_threshold: 7
@@ -235,14 +238,25 @@ def test_ros2_param_set_accepts_an_integer_for_a_float(
 
 
 def test_speed_sign_eval_reads_the_same_user_yaml(tmp_path: Path, user_yaml: Path) -> None:
+    """The file's ``detector.max_candidates`` (2) bounds the candidates of every frame of
+    the results bag, where the same drive without the file has more in some frame."""
     bag = tmp_path / 'drive'
     write_drive(SyntheticDrive(DriveConfig(seed=4, duration_s=1.0, fps=4, width_px=320,
                                            height_px=240, focal_px=380.0)), bag)
-    result = run(tool('speed_sign_eval'), 'bag', str(bag), '--config', str(user_yaml),
-                 '--backend', 'numpy', '--json')
-    assert result.returncode == 0, result.stderr
-    summary = json.loads(result.stdout.strip().splitlines()[-1])
-    assert summary['frames'] == 4
+    candidates_per_frame: dict[str, list[int]] = {}
+    for name, config in (('with the file', ['--config', str(user_yaml)]), ('without', [])):
+        out = tmp_path / f'out {name}'
+        result = run(tool('speed_sign_eval'), 'bag', str(bag), *config, '--backend', 'numpy',
+                     '--out', str(out), '--json')
+        assert result.returncode == 0, result.stderr
+        summary = json.loads(result.stdout.strip().splitlines()[-1])
+        assert summary['frames'] == 4
+        with BagReader(out) as results:
+            candidates_per_frame[name] = [pointcloud_to_array(item.message).size
+                                          for item in results.messages('/candidates')]
+    assert len(candidates_per_frame['with the file']) == 4
+    assert max(candidates_per_frame['without']) > 2, candidates_per_frame
+    assert max(candidates_per_frame['with the file']) == 2, candidates_per_frame
 
 
 def test_sigterm_while_the_node_publishes_stops_it_cleanly(
