@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 from pathlib import Path
 
 import cv2
@@ -302,7 +303,14 @@ def test_banks_are_deterministic_and_cached(cache_dir: Path, classifier: Classif
     np.testing.assert_array_equal(cached[0].classification, classifier.banks[0].classification)
     np.testing.assert_allclose(fresh[0].classification, cached[0].classification, rtol=1e-4,
                                atol=1e-3 * float(np.abs(cached[0].classification).max()))
-    assert classifier.bank_nbytes > 0 and classifier.build_time_s >= 0.0
+    # the memory counted is that of every bank's detection and classification spectra
+    assert classifier.bank_nbytes == sum(bank.detection.nbytes + bank.classification.nbytes
+                                         for bank in classifier.banks)
+    # the time reported is a part of the construction (here from the cache)
+    start = time.perf_counter()
+    from_cache = Classifier(config)
+    constructed_s = time.perf_counter() - start
+    assert 0.0 < from_cache.build_time_s <= constructed_s
 
 
 def test_unwritable_cache_is_not_fatal(tmp_path: Path) -> None:
