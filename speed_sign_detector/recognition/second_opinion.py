@@ -111,7 +111,7 @@ class SecondOpinion:
         return total / len(self.weights)
 
     def choose(self, scores: np.ndarray, ranked_labels: Sequence[str], candidates: int,
-               min_lead: float) -> str | None:
+               min_lead: float, overrule_lead: float = 0.0) -> str | None:
         """The label to answer for one sign, or ``None`` to withhold.
 
         Args:
@@ -119,6 +119,9 @@ class SecondOpinion:
             ranked_labels: the correlation filters' labels, best first (repeats allowed).
             candidates: how many of the leading distinct labels the model may choose from.
             min_lead: least lead of the chosen label over the model's next best label.
+            overrule_lead: least lead for the model to answer a limit other than the limit
+                the correlation ranked first (a weaker lead withholds the answer: a value
+                the two disagree on is not published).
 
         Returns:
             One of ``ranked_labels`` or ``None``.
@@ -145,6 +148,9 @@ class SecondOpinion:
         lead = float(scores[real[0]] - scores[real[1]]) if len(real) > 1 else np.inf
         allowed = [label for label in distinct[:candidates] if label in self.real_labels]
         if model_best not in allowed or lead < min_lead:
+            return None
+        if model_best != distinct[0] and model_best.isdigit() and distinct[0].isdigit() \
+                and lead < overrule_lead:
             return None
         if model_best == END_OF_LIMIT_LABEL and distinct[0].isdigit():
             # an end of limit drops the limit in force: the model confirms one the
