@@ -309,13 +309,14 @@ class GLVoter:
         self._stage_start = 0.0
 
     def profile_stages(self, enabled: bool) -> None:
-        """Record per-stage times in ``stage_ms`` (adds a GPU sync per stage; for benches)."""
+        """Record per-stage times in ``stage_ms`` (adds a GPU sync per stage, during which
+        other Python threads run)."""
         self.stage_ms = {} if enabled else None
 
     def _stage(self, name: str | None) -> None:
         if self.stage_ms is None:
             return
-        self._ctx.finish()
+        self._calls.finish()  # the GPU sync, without holding the GIL
         now = time.perf_counter()
         if name is not None:
             self.stage_ms[name] = self.stage_ms.get(name, 0.0) + 1e3 * (now - self._stage_start)
