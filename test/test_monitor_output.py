@@ -10,8 +10,9 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
+import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import pytest
 import rclpy
@@ -19,9 +20,13 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import UInt16
+from ros_spin import module_domain
 from test_node_cli import tool
 
-DOMAIN_ID = 98
+DOMAIN_ID = module_domain('test_monitor_output')
+WAIT_S = 60.0
+#: The simulated node's diagnostics period, seconds.
+REPORT_PERIOD_S = 0.4
 REPORTS = 6
 pytestmark = pytest.mark.ros
 
@@ -48,7 +53,49 @@ def status(index: int) -> DiagnosticArray:
         values=[KeyValue(key=key, value=value) for key, value in values.items()])])
 
 
+class OutputLines:
+    """The lines a process prints on stdout, read as they come on a thread."""
+
+    def __init__(self, process: subprocess.Popen) -> None:
+        self.lines: list[str] = []
+        self._lock = threading.Lock()
+        self._thread = threading.Thread(target=self._read, args=(process,), daemon=True)
+        self._thread.start()
+
+    def _read(self, process: subprocess.Popen) -> None:
+        for line in process.stdout:
+            with self._lock:
+                self.lines.append(line.rstrip('\n'))
+
+    def matching(self, keep: Callable[[str], bool]) -> list[str]:
+        with self._lock:
+            return [line for line in self.lines if keep(line)]
+
+    def wait_for(self, keep: Callable[[str], bool], count: int, what: str,
+                 process: subprocess.Popen) -> None:
+        """Until ``count`` lines satisfy ``keep``; fails naming ``what`` after WAIT_S or
+        when the process ended."""
+        deadline = time.monotonic() + WAIT_S
+        while len(self.matching(keep)) < count:
+            assert process.poll() is None, f'the monitor ended before {what}: {self.lines}'
+            assert time.monotonic() < deadline, f'no {what} within {WAIT_S:.0f} s: {self.lines}'
+            time.sleep(0.02)
+
+    def close(self) -> list[str]:
+        """Every line, once the process closed its stdout."""
+        self._thread.join(timeout=WAIT_S)
+        with self._lock:
+            return list(self.lines)
+
+
+def is_report(line: str) -> bool:
+    return 'processed 440' in line
+
+
 def test_one_line_per_report_and_an_idle_final_state(fake_node: Node) -> None:
+    """Each report is published once the monitor has printed the one before (so the
+    count is exact over a reliable topic), then a report period passes, in which a
+    monitor printing once per poll would print the same line again."""
     latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
     fake_node.create_publisher(UInt16, 'speed_limit', latched).publish(UInt16(data=80))
@@ -57,26 +104,30 @@ def test_one_line_per_report_and_an_idle_final_state(fake_node: Node) -> None:
                                env=dict(os.environ, ROS_DOMAIN_ID=str(DOMAIN_ID),
                                         PYTHONUNBUFFERED='1'),
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    output = OutputLines(monitor)
     try:
-        deadline = time.monotonic() + 60
+        deadline = time.monotonic() + WAIT_S
         while diagnostics.get_subscription_count() == 0:
             assert time.monotonic() < deadline, 'the monitor did not subscribe'
             time.sleep(0.05)
-        time.sleep(1.0)  # the latched limit reaches it
+        # the latched limit reaches it: a line of its own
+        output.wait_for(lambda line: line.startswith('limit 80 km/h'), 1, 'the limit',
+                        monitor)
         for index in range(REPORTS):
             diagnostics.publish(status(index))
-            time.sleep(0.4)
-        time.sleep(0.5)
+            output.wait_for(is_report, index + 1, f'the line of report {index + 1}', monitor)
+            time.sleep(REPORT_PERIOD_S)  # the node's reporting period, the span checked
     finally:
         monitor.send_signal(signal.SIGTERM)
-        output, errors = monitor.communicate(timeout=30)
+        monitor.wait(timeout=WAIT_S)
+    lines = output.close()
+    errors = monitor.stderr.read()
     assert monitor.returncode == 0, errors
-    lines = output.strip().splitlines()
     *reports, final = lines
-    report_lines = [line for line in reports if 'processed 440' in line]
-    assert len(report_lines) == REPORTS, output       # one per report, none repeated
-    assert len(set(report_lines)) == REPORTS, output
-    assert final.startswith('final state: limit 80 km/h'), output
+    report_lines = [line for line in reports if is_report(line)]
+    assert len(report_lines) == REPORTS, lines       # one per report, none repeated
+    assert len(set(report_lines)) == REPORTS, lines
+    assert final.startswith('final state: limit 80 km/h'), lines
     assert 'idle, last image 6 s ago' in final and 'fps 0.0' not in final
     assert 'transport (stamp to receipt) p50 4 p95 9 ms' in final
     assert 'lost in transport 3' in final and final.endswith('gl OK')

@@ -10,14 +10,14 @@ import shutil
 import signal
 import subprocess
 import sys
-import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 import rclpy
+from rcl_interfaces.msg import Log
 from rclpy.qos import ReliabilityPolicy
-from ros_spin import spinning
+from ros_spin import module_domain, ros_domain_environment, spinning
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 from test_node import (
@@ -32,7 +32,7 @@ from test_node import (
 
 from speed_sign_detector.ros.messages import image_message
 
-DOMAIN_ID = 88
+DOMAIN_ID = module_domain('test_node_process')
 PARAMS_FILE = Path(__file__).resolve().parents[1] / 'config' / 'speed_sign_detector.yaml'
 CAMERA_TOPIC = '/test_cam/image_raw'
 STOP_TIMEOUT_S = 30.0
@@ -81,12 +81,12 @@ def bank_cache(request: pytest.FixtureRequest) -> Path:
 
 @pytest.fixture(scope='module')
 def probe() -> Iterator[Probe]:
-    os.environ['ROS_DOMAIN_ID'] = str(DOMAIN_ID)
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=DOMAIN_ID)
-    probe = Probe(image_topic=CAMERA_TOPIC, context=context)
-    with spinning(context, probe):
-        yield probe
+    with ros_domain_environment(DOMAIN_ID):
+        context = rclpy.Context()
+        rclpy.init(context=context, domain_id=DOMAIN_ID)
+        probe = Probe(image_topic=CAMERA_TOPIC, context=context)
+        with spinning(context, probe):
+            yield probe
 
 
 def wait_until_serving(probe: Probe, process: subprocess.Popen) -> None:
@@ -125,6 +125,10 @@ def test_qos_override_and_clean_stop_on_ctrl_c(probe: Probe, bank_cache: Path) -
     """A reliable-only image subscription (QoS override) meets the probe's best-effort
     publisher: the node says the QoS is incompatible; Ctrl-C stops it cleanly."""
     probe.limits.clear()
+    node_warnings: list[str] = []
+    rosout = probe.create_subscription(
+        Log, '/rosout', lambda msg: node_warnings.append(msg.msg)
+        if msg.name == 'speed_sign_detector' and msg.level >= Log.WARN else None, 100)
     process = start_node(
         bank_cache, '-p', f'qos_overrides.{CAMERA_TOPIC}.subscription.reliability:=reliable')
 
@@ -136,9 +140,12 @@ def test_qos_override_and_clean_stop_on_ctrl_c(probe: Probe, bank_cache: Path) -
         [info] = wait_for(node_subscription, 'the node on the camera topic')
         assert info.qos_profile.reliability == ReliabilityPolicy.RELIABLE
         assert probe.image_pub.get_subscription_count() == 0  # not matched
-        time.sleep(2.0)  # the incompatible-QoS event reaches the node's executor
+        # the incompatible-QoS event reaches the node's executor, which warns
+        wait_for(lambda: [text for text in list(node_warnings) if 'incompatible' in text],
+                 'the node to warn of the incompatible QoS on /rosout')
     finally:
         status, output = stop(process, signal.SIGINT)
+        probe.destroy_subscription(rosout)
     assert status == 0, output
     assert 'Traceback' not in output, output
     assert 'incompatible' in output, output
