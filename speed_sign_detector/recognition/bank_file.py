@@ -27,6 +27,9 @@ from speed_sign_detector.errors import BankFileError
 __all__ = ['load_bank_file', 'save_bank_file']
 
 _META_KEY = '__meta__'
+#: The first bytes of every ``.npz`` file (a zip archive: a local file header, or the end
+#: record of an empty archive).
+_NPZ_MAGICS = (b'PK\x03\x04', b'PK\x05\x06')
 
 
 def _digest(array: np.ndarray) -> str:
@@ -73,6 +76,28 @@ def save_bank_file(path: Path, arrays: Mapping[str, np.ndarray], meta: Mapping[s
         temporary.unlink(missing_ok=True)
 
 
+def _check_npz_magic(path: Path, file_format: str) -> None:
+    """Refuse a file that is no ``.npz`` archive at all (a text file given as a bank)
+    before numpy reads it: numpy would take it for a pickle and advise loading it
+    unsafely.
+
+    Raises:
+        BankFileError: missing, unreadable, empty, or not an ``.npz`` archive.
+    """
+    try:
+        with open(path, 'rb') as handle:
+            head = handle.read(4)
+    except FileNotFoundError as err:
+        raise BankFileError(f'{path} does not exist') from err
+    except OSError as err:
+        raise BankFileError(f'{path} cannot be read ({err.strerror or err})') from err
+    if not head:
+        raise BankFileError(f'{path} is empty, not a bank file')
+    if not head.startswith(_NPZ_MAGICS):
+        raise BankFileError(f'{path} is not a bank file: not an .npz archive (a '
+                            f'{file_format} file is expected)')
+
+
 def load_bank_file(path: Path, file_format: str, versions: tuple[int, ...]
                    ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     """Read a file written by :func:`save_bank_file`.
@@ -90,6 +115,7 @@ def load_bank_file(path: Path, file_format: str, versions: tuple[int, ...]
             format or version; the message names the file and the reason.
     """
     path = Path(path)
+    _check_npz_magic(path, file_format)
     try:
         with np.load(path, allow_pickle=False) as data:
             if _META_KEY not in data.files:
