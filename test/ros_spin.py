@@ -20,12 +20,14 @@ JOIN_TIMEOUT_S = 10.0
 _MODULE_DOMAINS: dict[str, tuple[int, int]] = {
     'test_node': (87, 1),
     'test_node_process': (88, 1),
-    'test_node_cli': (89, 1),
+    'test_node_cli': (86, 1),
+    'test_cli_defects': (89, 2),
     'test_replay_monitor': (91, 2),
     'test_replay_delivery': (93, 1),
     'test_node_transport_loss': (94, 1),
     'test_lifecycle_node': (95, 3),
     'test_monitor_output': (98, 1),
+    'test_stage_timing': (100, 1),
 }
 
 

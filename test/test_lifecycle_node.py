@@ -18,7 +18,7 @@ from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from ros_spin import spinning
+from ros_spin import module_domain, ros_domain_environment, spinning
 from scene_helpers import textured_background
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
@@ -28,7 +28,10 @@ from test_node_cli import tool
 from speed_sign_detector.ros.lifecycle_node import ManagedSpeedSignDetectorNode
 from speed_sign_detector.ros.messages import image_message
 
-DOMAIN_ID = 95
+DOMAIN_ID = module_domain('test_lifecycle_node')
+#: The domains of the tests that start a node of their own.
+EXECUTABLE_DOMAIN_ID = module_domain('test_lifecycle_node', 1)
+UNCONFIGURED_DOMAIN_ID = module_domain('test_lifecycle_node', 2)
 pytestmark = pytest.mark.ros
 
 
@@ -57,17 +60,17 @@ class LifecycleClient(Node):
 @pytest.fixture(scope='module')
 def managed(request: pytest.FixtureRequest
             ) -> Iterator[tuple[ManagedSpeedSignDetectorNode, LifecycleClient, Probe]]:
-    os.environ['ROS_DOMAIN_ID'] = str(DOMAIN_ID)
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=DOMAIN_ID)
-    bank_cache = request.config.cache.mkdir('speed_sign_classifier_banks')
-    node = ManagedSpeedSignDetectorNode(context=context, parameter_overrides=[
-        Parameter('classifier.cache_dir', value=str(bank_cache)),
-        Parameter('diagnostics_period_s', value=0.5)])
-    client = LifecycleClient(context=context)
-    probe = Probe(context=context)
-    with spinning(context, node, client, probe):
-        yield node, client, probe
+    with ros_domain_environment(DOMAIN_ID):
+        context = rclpy.Context()
+        rclpy.init(context=context, domain_id=DOMAIN_ID)
+        bank_cache = request.config.cache.mkdir('speed_sign_classifier_banks')
+        node = ManagedSpeedSignDetectorNode(context=context, parameter_overrides=[
+            Parameter('classifier.cache_dir', value=str(bank_cache)),
+            Parameter('diagnostics_period_s', value=0.5)])
+        client = LifecycleClient(context=context)
+        probe = Probe(context=context)
+        with spinning(context, node, client, probe):
+            yield node, client, probe
 
 
 def send_frame(probe: Probe, seed: int) -> None:
@@ -125,7 +128,7 @@ def test_transitions_build_serve_pause_and_release(managed: tuple) -> None:
 def test_a_configure_that_cannot_build_the_pipeline_fails_with_the_reason(
         tmp_path: Path) -> None:
     """The installed executable with --lifecycle, backend gl and no EGL device."""
-    environment = dict(os.environ, ROS_DOMAIN_ID=str(DOMAIN_ID + 1), PYTHONUNBUFFERED='1',
+    environment = dict(os.environ, ROS_DOMAIN_ID=str(EXECUTABLE_DOMAIN_ID), PYTHONUNBUFFERED='1',
                        __EGL_VENDOR_LIBRARY_FILENAMES=str(tmp_path / 'no_vendor.json'))
     log_path = tmp_path / 'node.log'
     with log_path.open('w') as log:
@@ -133,7 +136,7 @@ def test_a_configure_that_cannot_build_the_pipeline_fails_with_the_reason(
                                     '-p', 'backend:=gl', '-p', 'classify:=false'],
                                    env=environment, stdout=log, stderr=subprocess.STDOUT)
     context = rclpy.Context()
-    rclpy.init(context=context, domain_id=DOMAIN_ID + 1)
+    rclpy.init(context=context, domain_id=EXECUTABLE_DOMAIN_ID)
     client = LifecycleClient(context=context)
     with spinning(context, client):
         try:
@@ -156,7 +159,7 @@ def test_a_parameter_set_while_unconfigured_is_built_in_not_applied_again(
     apply it a second time (which logged a spurious "parameters applied"); a change while
     configured is applied."""
     context = rclpy.Context()
-    rclpy.init(context=context, domain_id=DOMAIN_ID + 2)
+    rclpy.init(context=context, domain_id=UNCONFIGURED_DOMAIN_ID)
     bank_cache = request.config.cache.mkdir('speed_sign_classifier_banks')
     node = ManagedSpeedSignDetectorNode(context=context, parameter_overrides=[
         Parameter('classifier.cache_dir', value=str(bank_cache))])

@@ -18,11 +18,12 @@ from collections.abc import Iterator
 import pytest
 import rclpy
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from ros_spin import module_domain
 from std_msgs.msg import String
 
 from speed_sign_detector.tools.replay import confirm_delivery
 
-DOMAIN_ID = 93
+DOMAIN_ID = module_domain('test_replay_delivery')
 MATCH_TIMEOUT_S = 30.0
 SUBSCRIBER = f'''
 import sys
