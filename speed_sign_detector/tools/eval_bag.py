@@ -15,8 +15,9 @@ Example::
   active limit changes, like the node); with ``--debug-images`` ``/debug_image`` (bgr8);
   with ``--with-images`` the input images (``/image/compressed``) and Foxglove
   annotations of the detections (``/image/annotations``).
-- ``--contact-sheet PNG``: the drive at a glance, tiles chosen around the limit changes
-  (:mod:`speed_sign_detector.tools.contact_sheet`).
+- ``--contact-sheet PNG``: the drive at a glance, tiles chosen around the limit changes,
+  zoomed views of the signs read, and with ``--truth`` the truth and a tile for every
+  missed sign (:mod:`speed_sign_detector.tools.contact_sheet`).
 - Output paths are checked, and their missing folders created, before the first frame.
 - Times are reported as seconds since the first processed frame (``time_s``;
   ``start_stamp_s`` is that frame's stamp).
@@ -445,7 +446,7 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
         frames_total = image_topic.count if image_topic.count >= 0 else None
         writer = (ResultsBagWriter(out_path, debug_images, with_images)
                   if out_path is not None else None)
-        sheet = (ContactSheetCollector(contact_sheet_path, frames_total)
+        sheet = (ContactSheetCollector(contact_sheet_path, frames_total, tracks)
                  if contact_sheet_path is not None else None)
         bar = ItemProgress(frames_total, 'frames', 'frame', enabled=progress)
         started = time.perf_counter()
@@ -471,8 +472,7 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
                 new_events = new_limit_events(result, recognized_ids)
                 events.extend(new_events)
                 if sheet is not None:
-                    sheet.offer(len(stamps_s) - 1, stamp_ns * 1e-9, gray, result,
-                                [event.limit_kmh for event in new_events])
+                    sheet.offer(len(stamps_s) - 1, stamp_ns * 1e-9, gray, result, new_events)
                 if result.active_limit_kmh != active_limit:
                     active_limit = result.active_limit_kmh
                     limit_changes.append((stamp_ns * 1e-9, active_limit))
@@ -526,11 +526,15 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
             if sheet is not None:
                 header = (f'{Path(bag_path).name}: {len(stamps_s)} frames of '
                           f'{image_topic.name}, {_span_s(stamps_s):.1f} s of drive')
-                notes = [f'limits recognized: {_event_times(events, stamps_s)}']
+                notes = [f'limits published (confirmed by the tracker): '
+                         f'{_event_times(events, stamps_s)}']
                 if stopped_by is not None or interrupted:
                     notes.append(f'stopped early: {stopped_by or "interrupted (Ctrl-C)"}')
                 try:
-                    sheet_written = sheet.write(header, notes)
+                    outcomes = None if tracks is None else score_drive(
+                        tracks, events, stamps_s, grace_s, stopped_early=interrupted
+                        or stopped_by is not None or bag.salvage_reason is not None).outcomes
+                    sheet_written = sheet.write(header, notes, outcomes)
                 except SpeedSignError as err:   # the metrics are still reported
                     stopped_by = stopped_by or err
         finally:
@@ -694,7 +698,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         'and Foxglove annotations of the detections (/image/annotations)')
     parser.add_argument('--contact-sheet', type=Path, metavar='PNG',
                         help='write the drive at a glance as one picture (.png or .jpg): '
-                        'frames around the limit changes, with time and active limit')
+                        'frames around the limit changes with zoomed views of the signs '
+                        'read (published or single-frame); with --truth also the truth '
+                        'and a tile for every missed sign')
     add_pipeline_options(parser)
     parser.add_argument('--json', action='store_true',
                         help='print the summary as one JSON object (last stdout line)')
