@@ -12,7 +12,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from process_helpers import CLASSIFIER_WORKER, child_processes
+from process_helpers import (
+    CLASSIFIER_WORKER,
+    child_processes,
+    process_state,
+    signal_mask,
+    wait_until,
+)
 
 from speed_sign_detector.config import ClassifierConfig, ConfigError, PipelineConfig
 from speed_sign_detector.detection.candidates import Candidate
@@ -221,7 +227,12 @@ def test_interrupt_of_the_process_group_leaves_the_worker_to_its_parent(
     gray, candidates = _frame()
     pid = worker.pid
     assert pid is not None
+    sigint_bit = 1 << (signal.SIGINT - 1)
+    assert signal_mask(pid, 'SigIgn') & sigint_bit, 'the worker does not ignore SIGINT'
     os.kill(pid, signal.SIGINT)
+    wait_until(lambda: not (signal_mask(pid, 'SigPnd') | signal_mask(pid, 'ShdPnd'))
+               & sigint_bit, 'the SIGINT to leave the pending signals of the worker')
+    assert process_state(pid) not in (None, 'Z')
     assert worker.classify(gray, candidates) == in_process.classify(gray, candidates)
     assert worker.pid == pid
 
@@ -233,6 +244,7 @@ def test_hung_worker_is_killed_after_the_answer_timeout_then_replaced(
         hung = process.pid
         assert hung is not None
         os.kill(hung, signal.SIGSTOP)  # as a deadlocked worker: alive, never answering
+        wait_until(lambda: process_state(hung) == 'T', 'the worker to stop')
         with pytest.raises(ClassifierProcessError, match='did not answer within 1 s'):
             process.classify(gray, candidates)
         assert not _alive(hung)
