@@ -76,7 +76,11 @@ from speed_sign_detector.ros.messages import (
     diagnostics_message,
     speed_limit_message,
 )
-from speed_sign_detector.ros.parameters import declare_node_parameters, parameter_values
+from speed_sign_detector.ros.parameters import (
+    declare_node_parameters,
+    parameter_values,
+    unknown_parameter_overrides,
+)
 
 #: QoS of the image subscriptions (sensor data: best effort, volatile, keep last 5).
 IMAGE_QOS = qos_profile_sensor_data
@@ -116,6 +120,8 @@ class DetectorNodeBase:
         self._pipeline_specs = parameter_specs()
         self._pipeline_names = frozenset(spec.name for spec in self._pipeline_specs)
         declare_node_parameters(self)
+        for warning in unknown_parameter_overrides(self):
+            self.get_logger().warning(warning)
         self._pipeline_config, self._options = self.read_parameters()
         self.add_on_set_parameters_callback(self._on_set_parameters)
 

@@ -21,12 +21,20 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from speed_sign_detector.config import ParameterSpec, node_option_specs, parameter_specs
+from speed_sign_detector.config import (
+    ParameterSpec,
+    node_option_specs,
+    parameter_specs,
+    unknown_parameter_message,
+)
 
 NODE_NAME = 'speed_sign_detector'
 
 #: Parameters that cannot change while the node runs.
 READ_ONLY_PARAMETERS = frozenset({'diagnostics_period_s', 'overlap_stages'})
+#: Parameters that rclpy declares itself once a publisher or subscription exists (after
+#: the start-up check of :func:`unknown_parameter_overrides`).
+RCLPY_LATER_PARAMETER_PREFIXES = ('qos_overrides.',)
 
 
 def all_parameter_specs() -> tuple[ParameterSpec, ...]:
@@ -82,6 +90,24 @@ def declare_node_parameters(node: Node) -> None:
         if isinstance(value, int) and not isinstance(value, bool) and not read_only:
             node.set_parameters([Parameter(spec.name, Parameter.Type.DOUBLE, float(value))])
         # ...a read-only one keeps the integer; the config converts it when read
+
+
+def unknown_parameter_overrides(node: Node) -> list[str]:
+    """One warning per parameter given at start-up (``-p``, ``--params-file``) that
+    ``node`` has not declared: rclpy ignores such a value without a word (a misspelt
+    ``detector.min_raduis_px``). Call it after :func:`declare_node_parameters`.
+
+    Returns:
+        ``unknown parameter detector.min_raduis_px (did you mean
+        detector.min_radius_px?) is ignored``, one per unknown name, sorted.
+    """
+    # rclpy keeps the start-up values in Node._parameter_overrides (no public accessor)
+    overrides = getattr(node, '_parameter_overrides', None) or {}
+    known = [spec.name for spec in all_parameter_specs()]
+    return [f'{unknown_parameter_message(name, known)} is ignored'
+            for name in sorted(overrides)
+            if not node.has_parameter(name)
+            and not name.startswith(RCLPY_LATER_PARAMETER_PREFIXES)]
 
 
 def parameter_values(node: Node, specs: tuple[ParameterSpec, ...]) -> dict[str, Any]:
