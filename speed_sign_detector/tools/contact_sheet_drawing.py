@@ -241,8 +241,8 @@ def legend_lines(with_truth: bool) -> list[tuple[str, str]]:
     the line with a swatch of that colour."""
     lines = [
         ('text', 'Each tile: time since the first frame; "limit" = the limit published on '
-                 'speed_limit after that frame (- none yet); at the right, why the frame was '
-                 'chosen.'),
+                 'speed_limit after that frame (- = none: not known yet, or ended); at the '
+                 'right, why the frame was chosen.'),
         ('published', 'green circle: a reading the tracker confirmed over several frames '
                       'and published as the limit ("published at ...").'),
         ('single_frame', 'yellow circle: a single-frame reading: read in some frame(s) '
