@@ -37,12 +37,16 @@ GTSRB_LOOKALIKE_NAMES: dict[int, str] = {
     33: 'turn_right_ahead', 34: 'turn_left_ahead', 35: 'ahead_only', 36: 'ahead_or_right',
     37: 'ahead_or_left', 38: 'keep_right', 39: 'keep_left', 40: 'roundabout',
     41: 'end_of_no_passing', 42: 'end_of_no_passing_over_3.5t'}
+#: GTSRB class id of the end of all speed and passing limits (VZ 282): it ends the limit
+#: in force too, so it is read as an end of limit.
+GTSRB_END_OF_ALL_LIMITS = 32
 #: GTSRB class id -> the classifier's label for it: the limit in km/h as a string,
-#: ``'end_of_limit'``, or ``'other_sign'`` for the round look-alikes (negatives).
+#: ``'end_of_limit'`` (the end of 80 and the end of all limits), or ``'other_sign'`` for
+#: the other round look-alikes (negatives).
 GTSRB_CLASS_NAMES: dict[int, str] = {
     **{class_id: str(limit) for class_id, limit in GTSRB_LIMITS_KMH.items()},
-    GTSRB_END_OF_80: 'end_of_limit',
-    **{class_id: 'other_sign' for class_id in GTSRB_LOOKALIKE_NAMES}}
+    **{class_id: 'other_sign' for class_id in GTSRB_LOOKALIKE_NAMES},
+    GTSRB_END_OF_80: 'end_of_limit', GTSRB_END_OF_ALL_LIMITS: 'end_of_limit'}
 
 
 @dataclass(frozen=True)

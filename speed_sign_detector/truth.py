@@ -48,9 +48,14 @@ TRUTH_COLUMNS: tuple[str, ...] = ('stamp_s', 'frame', 'track_id', 'kind', 'limit
 END_OF_LIMIT_KIND_PREFIX = 'end_of_limit'
 
 
+#: The kind of the end of all restrictions (VZ 282), which ends the limit in force too.
+END_OF_ALL_RESTRICTIONS_KIND = 'end_of_restrictions'
+
+
 def is_end_of_limit_kind(kind: str) -> bool:
-    """True when a truth ``kind`` names an end-of-limit sign."""
-    return kind.startswith(END_OF_LIMIT_KIND_PREFIX)
+    """True when a truth ``kind`` names a sign that ends the limit in force: an end of limit
+    (``end_of_limit_50``, ...) or the end of all restrictions."""
+    return kind.startswith(END_OF_LIMIT_KIND_PREFIX) or kind == END_OF_ALL_RESTRICTIONS_KIND
 
 
 @dataclass(frozen=True)

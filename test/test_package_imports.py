@@ -129,7 +129,8 @@ def loaded_package_modules(modules: tuple[str, ...]) -> list[str]:
     probe = ('import importlib, json, sys\n'
              f'for name in {list(modules)!r}:\n'
              '    importlib.import_module(name)\n'
-             f'print(json.dumps(sorted(m for m in sys.modules if m.startswith({PACKAGE_NAME!r}))))')
+             'print(json.dumps(sorted(m for m in sys.modules\n'
+             f'                        if m.startswith({PACKAGE_NAME!r}))))')
     completed = subprocess.run([sys.executable, '-c', probe], cwd=PROJECT_ROOT,
                                capture_output=True, text=True, timeout=300, check=False)
     assert completed.returncode == 0, completed.stderr

@@ -167,6 +167,7 @@ def test_train_command_learns_from_scenes_and_reports_a_missing_folder(
         'build', str(out), str(crop_folder), '--scenes', str(scene_folder), '--config',
         str(config), '--augmented-copies', '0', '--rendered-per-kind', '1',
         '--scene-copies', '1', '--epochs', '2', '--members', '1', '--composites-per-value', '2',
+        '--design-per-kind', '0',
         '--json', '-q'],
         capture_output=True, text=True, timeout=300, env=env)
     assert done.returncode == 0, done.stderr

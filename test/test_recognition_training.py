@@ -47,9 +47,12 @@ from speed_sign_detector.recognition.trained_bank import (
     load_trained_bank,
     save_trained_bank,
 )
+from speed_sign_detector.recognition.sign_designs import design_training_crops
 from speed_sign_detector.training.bank_training import (
     TrainingConfig,
     cross_validate,
+    locate_rendered,
+    rendered_classifier,
     rendered_training_crops,
     train_bank,
 )
@@ -59,7 +62,7 @@ SMALL = ClassifierConfig(max_radius_px=24.0, cache_dir='', bank_file='none')
 #: GTSRB class id -> rendered kind.
 KINDS = {1: '30', 2: '50', 5: '80', 17: 'no_entry'}
 TRAINING = TrainingConfig(augmented_copies=1, examples_per_class=2, rendered_per_kind=3,
-                          composites_per_value=4)
+                          composites_per_value=4, design_per_kind=1)
 
 
 def crop_of(kind: str, sign_px: int, margin_px: int, seed: int, blur_px: float = 0.0
@@ -341,7 +344,7 @@ def test_train_command_builds_a_bank_and_reports_bad_input(tmp_path: Path,
     done = subprocess.run(_train_command() + [
         'build', str(out), str(crop_folder), '--config', str(config), '--augmented-copies', '0',
         '--examples-per-class', '1', '--rendered-per-kind', '1', '--real-filter-weight', '0.5',
-        '--composites-per-value', '2',
+        '--composites-per-value', '2', '--design-per-kind', '0',
         '--json', '-q'], capture_output=True, text=True, timeout=300, env=env)
     assert done.returncode == 0, done.stderr
     summary = json.loads(done.stdout.strip().splitlines()[-1])
@@ -403,6 +406,25 @@ def test_arched_six_renderings_follow_the_other_renderings() -> None:
     for crop, plain in zip(crops, plain_crops):
         np.testing.assert_array_equal(crop, plain)
     assert all(crop.ndim == 2 and crop.shape[0] >= 26 for crop in crops[-3:])
+
+
+def test_design_renderings_join_the_rendered_training_crops() -> None:
+    """LED and yellow-faced signs of every limit, and the end of all restrictions (read as
+    an end of limit), join the second opinion's rendered crops, after the usual ones."""
+    classifier = rendered_classifier(SMALL)
+    plain = locate_rendered(classifier, dataclasses.replace(TRAINING, design_per_kind=0))
+    with_designs = locate_rendered(classifier, TRAINING)
+    assert plain is not None and with_designs is not None
+    design_images, design_labels = design_training_crops(
+        TRAINING.design_per_kind, np.random.default_rng(TRAINING.seed + 3))
+    labels = [crop.label for crop in with_designs.crops]
+    assert labels == [crop.label for crop in plain.crops] + design_labels
+    assert set(design_labels) == {str(v) for v in LIMIT_VALUES_KMH} | {'end_of_limit'}
+    for image, design_image in zip(with_designs.images[len(plain.crops):], design_images):
+        np.testing.assert_array_equal(image, design_image)
+    # 'end_of_restrictions' renderings are ends of limits, never 'other_sign'
+    crops, kinds = rendered_training_crops(1, np.random.default_rng(0))
+    assert 'other_sign' in kinds and kinds.count('end_of_limit') >= 2
 
 
 def _opinion(labels: tuple[str, ...], real: tuple[str, ...]) -> SecondOpinion:

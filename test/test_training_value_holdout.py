@@ -26,7 +26,8 @@ from speed_sign_detector.training.bank_training import TrainingConfig
 from speed_sign_detector.training.value_holdout import leave_one_value_out, value_answers
 
 TINY = TrainingConfig(augmented_copies=0, rendered_per_kind=1, arched_six_per_kind=0,
-                      composites_per_value=2, epochs=2, members=1, hidden_units=16)
+                      composites_per_value=2, design_per_kind=0, epochs=2, members=1,
+                      hidden_units=16)
 VALUES = sorted({kind for kind in KINDS.values() if kind.isdigit()}, key=int)
 
 
@@ -75,7 +76,9 @@ def test_the_command_reports_each_value_and_refuses_unknown_ones(crop_folder: Pa
     params = write_small_params(tmp_path)
     common = ['validate', str(crop_folder), '--config', str(params), '--folds', '3',
               '--leave-one-value-out', '--augmented-copies', '0', '--rendered-per-kind', '1',
-              '--arched-six-per-kind', '0', '--composites-per-value', '2', '--epochs', '2',
+              '--arched-six-per-kind', '0', '--composites-per-value', '2',
+              '--design-per-kind', '0',
+              '--epochs', '2',
               '--members', '1', '--hidden-units', '16', '-q']
     done = subprocess.run([*_train_command(), *common, '--values', VALUES[0], '--json'],
                           capture_output=True, text=True, timeout=600)

@@ -77,6 +77,7 @@ def test_train_build_names_the_unreadable_crop_without_opencv_lines(
         [_installed('speed_sign_train'), 'build', str(out), str(crops_with_broken_png),
          '--config', str(small_params), '--no-second-opinion', '--augmented-copies', '0',
          '--examples-per-class', '0', '--rendered-per-kind', '1', '--composites-per-value', '0',
+         '--design-per-kind', '0',
          '-q'],
         capture_output=True, text=True, timeout=300, check=False)
     assert done.returncode == 1, done.stderr  # finished, but skipped input

@@ -12,8 +12,9 @@ three gray levels of a small window around the candidate (cheap next to the corr
 
 A sign is lit on dark where its ring is brighter than its face by :data:`MIN_CONTRAST` gray
 levels, its digit box by :data:`MIN_DIGIT_CONTRAST`, and its face is dark next to its digits
-(:data:`MAX_FACE_TO_DIGITS`: not a blue sign's face beside its white arrows). A painted sign fails it whatever its lighting (its
-face is brighter than its red ring and its digits); so does an electronic sign of the rarer
+(:data:`MAX_FACE_TO_DIGITS`: not a blue sign's face beside its white arrows). A painted
+sign fails it whatever its lighting (its face is brighter than its red ring and its
+digits); so does an electronic sign of the rarer
 dark-on-lit polarity, which the classifier reads as it reads a painted one, and flat
 clutter.
 """

@@ -112,6 +112,10 @@ def build_parser() -> argparse.ArgumentParser:
                         help='composite crops of every limit value (5 to 140 km/h) made from '
                         'the real crops\' digits, so that values without real crops are '
                         'learned from real pixels too (0: renderings only)')
+    common.add_argument('--design-per-kind', type=non_negative_integer,
+                        default=_DEFAULTS.design_per_kind,
+                        help='rendered crops of every limit on LED and yellow-faced signs, '
+                        'and of the end of all restrictions, for the second opinion')
     common.add_argument('--scenes', type=Path, action='append', default=[],
                         metavar='SCENE_DIR', help='annotated scene folder (GTSDB format: '
                         'images/ and gt.txt) to learn real signs and background from; '
@@ -175,6 +179,7 @@ def _configs(args: argparse.Namespace
                                   rendered_per_kind=args.rendered_per_kind,
                                   arched_six_per_kind=args.arched_six_per_kind,
                                   composites_per_value=args.composites_per_value,
+                                  design_per_kind=args.design_per_kind,
                                   scene_copies=args.scene_copies,
                                   second_opinion=not args.no_second_opinion,
                                   real_filter_weight=args.real_filter_weight,

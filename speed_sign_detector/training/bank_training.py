@@ -56,6 +56,7 @@ from speed_sign_detector.recognition.classifier import (
     Classifier,
     CorrelationEvidence,
 )
+from speed_sign_detector.recognition.sign_designs import design_label, design_training_crops
 from speed_sign_detector.recognition.sign_features import aligned_patches, sign_features
 from speed_sign_detector.recognition.templates import (
     ARCHED_SIX_GEOMETRY,
@@ -127,6 +128,10 @@ class TrainingConfig:
             filters: values with no real crop (130, 140, ...) are then learned from real
             pixels too, and every value counts as one the second opinion may choose
             (0 = none: values without real crops are known from renderings only).
+        design_per_kind: rendered crops of every limit in each sign design that painted
+            signs lack (LED signs, read inverted as the classifier reads them, and
+            yellow-faced signs) and of the end of all restrictions
+            (:func:`.sign_designs.design_training_crops`), with the other renderings.
         scene_copies: degraded copies of each example cut from annotated scenes
             (:mod:`.scene_examples`).
         second_opinion: train the second opinion at all.
@@ -150,6 +155,7 @@ class TrainingConfig:
     rendered_per_kind: int = 100
     arched_six_per_kind: int = 200
     composites_per_value: int = 300
+    design_per_kind: int = 20
     scene_copies: int = 2
     second_opinion: bool = True
     real_filter_weight: float = 0.25
@@ -164,7 +170,7 @@ class TrainingConfig:
             if getattr(self, name) < 1:
                 raise ValueError(f'{name} must be >= 1, got {getattr(self, name)}')
         for name in ('augmented_copies', 'rendered_per_kind', 'arched_six_per_kind',
-                     'composites_per_value',
+                     'composites_per_value', 'design_per_kind',
                      'scene_copies', 'real_filter_weight', 'real_filter_noise'):
             if getattr(self, name) < 0:
                 raise ValueError(f'{name} must be >= 0, got {getattr(self, name)}')
@@ -279,8 +285,7 @@ def rendered_training_crops(per_kind: int, rng: np.random.Generator,
     crops: list[np.ndarray] = []
     labels: list[str] = []
     for kind in kinds:
-        label = kind if kind.isdigit() else (
-            'end_of_limit' if kind.startswith('end_of_limit') else 'other_sign')
+        label = design_label(kind)
         for _ in range(per_kind):
             crops.append(_rendered_crop(kind, rng))
             labels.append(label)
@@ -419,6 +424,11 @@ def locate_rendered(classifier: Classifier, config: TrainingConfig) -> LocatedCr
     images, labels = rendered_training_crops(config.rendered_per_kind,
                                              np.random.default_rng(config.seed + 1),
                                              config.arched_six_per_kind)
+    if config.design_per_kind > 0:
+        design_images, design_labels = design_training_crops(
+            config.design_per_kind, np.random.default_rng(config.seed + 3))
+        images += design_images
+        labels += design_labels
     crops = [_RenderedCrop(label) for label in labels]
     return locate_signs(classifier, crops, images)  # type: ignore[arg-type]
 

@@ -16,8 +16,8 @@ and "0" of a 120 sign makes a 130):
 2. A digit is carried as *ink*: ``(face - pixel) / (face - ink)`` of its source crop,
    clipped to [0, 1], so that a digit from a bright sign lands on a dark one without a
    seam. The background's own digits where the new value differs are erased first
-   (their ink taken away, leaving the face's own shading), then the new ink is laid over at the background's
-   ink level.
+   (their ink taken away, leaving the face's own shading), then the new ink is laid
+   over at the background's ink level.
 3. Digit sources, in order: a real digit of the same character (a "9" is also a real
    "6" turned by 180 degrees, as DIN 1451 draws them); else the renderer's glyph at the
    background's size, lightly blurred, in the background's real context. A value whose
