@@ -50,12 +50,12 @@ from speed_sign_detector.recognition.trained_bank import (
 from speed_sign_detector.recognition.sign_designs import design_training_crops
 from speed_sign_detector.training.bank_training import (
     TrainingConfig,
-    cross_validate,
     locate_rendered,
     rendered_classifier,
     rendered_training_crops,
     train_bank,
 )
+from speed_sign_detector.training.track_validation import cross_validate
 
 #: Small banks (radius 16-24 px) keep the module fast.
 SMALL = ClassifierConfig(max_radius_px=24.0, cache_dir='', bank_file='none')

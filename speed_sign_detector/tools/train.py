@@ -44,11 +44,10 @@ from speed_sign_detector.tools.run_control import run_subcommand
 from speed_sign_detector.training.bank_training import (
     MIN_LEAD_OF_MODEL,
     SECOND_OPINION_MODELS,
-    VARIANTS,
     TrainingConfig,
-    cross_validate,
     train_bank,
 )
+from speed_sign_detector.training.track_validation import VARIANTS, cross_validate
 from speed_sign_detector.training.value_holdout import leave_one_value_out
 
 _DEFAULTS = TrainingConfig()

@@ -30,16 +30,15 @@ from speed_sign_detector.training.bank_training import (
     LocatedCrops,
     ProgressCallback,
     TrainingConfig,
-    answer_is_limit,
     locate_rendered,
     locate_signs,
     read_crops,
     rendered_classifier,
     scene_examples_of,
-    summarise,
     train_from_located,
 )
 from speed_sign_detector.training.scene_examples import SceneExamples
+from speed_sign_detector.training.track_validation import answer_is_limit, summarise
 
 __all__ = ['hold_out_values', 'leave_one_value_out', 'value_answers']
 
