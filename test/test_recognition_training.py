@@ -134,6 +134,18 @@ def test_training_gives_a_bank_that_reads_those_signs(trained: TrainedBank) -> N
                                                       'other_sign': 9}
 
 
+def test_values_made_of_real_digits_count_as_learned_from_real_pixels(
+        trained: TrainedBank) -> None:
+    """The crops show 30, 50 and 80: a 5 km/h composite has only real digits (the 5 of the
+    50), so the second opinion may choose it; 20, 40 or 130 need a digit no crop shows, so
+    they stay rendered classes, which it never chooses over the correlation."""
+    opinion = trained.second_opinion
+    assert opinion is not None
+    assert {'30', '50', '80', '5'} <= set(opinion.real_labels)
+    assert not {'20', '40', '130', '140'} & set(opinion.real_labels)
+    assert {'20', '40', '130', '140'} <= set(opinion.labels)  # known from renderings
+
+
 def test_bank_file_round_trips(tmp_path: Path, trained: TrainedBank) -> None:
     path = tmp_path / 'bank.npz'
     save_trained_bank(path, trained)
@@ -446,10 +458,17 @@ def test_second_opinion_chooses_only_among_ranked_real_labels() -> None:
     rendered_best = np.asarray([0.1, -0.5, -0.5, 0.9, -1.0])
     assert opinion.choose(rendered_best, ['30', '130'], 2, 0.2) == '30'
     # the correlation's rendered-only winner stands only where the model reads it too;
-    # otherwise the model may choose a real label among the leading ones, as always
+    # otherwise the answer is withheld: a model that never saw that value's real pixels
+    # does not turn it into another limit (a 130 into the 120 it knows)
     assert opinion.choose(rendered_best, ['130', '30'], 2, 0.2) == '130'
-    assert opinion.choose(scores, ['130', '30'], 2, 0.2) == '30'
+    assert opinion.choose(scores, ['130', '30'], 2, 0.2) is None
     assert opinion.choose(scores, ['130', '80', '30'], 2, 0.2) is None
+    # a real winner may still be overruled by a real runner-up with a clear lead ...
+    assert opinion.choose(scores, ['70', '30'], 2, 0.2, overrule_lead=0.5) == '30'
+    # ... but a lead under overrule_lead withholds a limit the two disagree on
+    assert opinion.choose(scores, ['70', '30'], 2, 0.2, overrule_lead=0.8) is None
+    # agreeing with the winner needs no more than min_lead
+    assert opinion.choose(scores, ['30', '70'], 2, 0.2, overrule_lead=0.8) == '30'
     unsure = np.asarray([0.1, 0.0, 0.0, -0.1, 0.2])   # the model reads no limit at all
     assert opinion.choose(unsure, ['130', '30'], 2, 0.2) is None
     # ... and not as "rather not 130": best, but below the floor of its score

@@ -3,13 +3,17 @@ correlation filters ranked highest, or withholds the answer.
 
 It never adds a class: it picks one of the correlation's ``candidates`` leading labels,
 and only when it agrees that this label is the best of the labels it has real examples
-of, with a lead of at least ``min_lead``. A class it has no real examples of (a limit
-such as 130 km/h, learned from renderings only) is never its choice: when the
+of, with a lead of at least ``min_lead`` (and of ``overrule_lead`` to answer a limit
+other than the correlation's leading limit). Its real labels are those it learned from
+real pixels: real crops, or composites of real digits (a 130 made of the real digits of
+120 and 30 signs). A class it has no real examples of (a limit whose digits it has seen
+only rendered, such as the 4 of 40 and 140 km/h) is never its choice: when the
 correlation filters rank such a class first, their answer stands only where the model
 scores that class highest too, at least :data:`RENDERED_ONLY_MIN_SCORE` (the linear
 form) or :data:`NETWORK_RENDERED_ONLY_MIN_SCORE` (the network form); otherwise the
-answer is withheld. Nor does it turn a limit the correlation read first into an end of
-limit (which would drop the limit in force): it withholds the answer instead.
+answer is withheld, never turned into another limit. Nor does it turn a limit the
+correlation read first into an end of limit (which would drop the limit in force): it
+withholds the answer instead.
 
 The model takes standardised :mod:`.sign_features` and has one of two forms, both with
 scores from about -1 to +1 per class, comparable across classes:
@@ -136,13 +140,17 @@ class SecondOpinion:
         if distinct[0] not in self.real_labels:
             # no real examples of the correlation's winner: it stands where the model,
             # which learned it from renderings, reads it too, and not as "rather not this
-            # class" (its one-vs-rest target is +1 for the class, -1 else); otherwise the
-            # model may still choose a label with real examples among the leading ones
+            # class" (its one-vs-rest target is +1 for the class, -1 else)
             best = int(order[0])
             floor = RENDERED_ONLY_MIN_SCORE if self.form == 'linear' else \
                 NETWORK_RENDERED_ONLY_MIN_SCORE
             if self.labels[best] == distinct[0] and float(scores[best]) >= floor:
                 return distinct[0]
+            if distinct[0].isdigit():
+                # a model that never saw this value's real pixels rejects them on weak
+                # grounds: it does not turn the value into another (it would pull a 130
+                # to the 120 it knows); the answer is withheld
+                return None
         real = [int(i) for i in order if self.labels[int(i)] in self.real_labels]
         model_best = self.labels[real[0]]
         lead = float(scores[real[0]] - scores[real[1]]) if len(real) > 1 else np.inf

@@ -116,9 +116,10 @@ class TrainingConfig:
         composites_per_value: composite crops of every speed-limit value the package
             knows (:data:`.templates.LIMIT_VALUES_KMH`), made from the real training crops'
             digits (:mod:`.digit_composites`), for the second opinion and the composite
-            filters: values with no real crop (130, 140, ...) are then learned from real
-            pixels too, and every value counts as one the second opinion may choose
-            (0 = none: values without real crops are known from renderings only).
+            filters: values with no real crop (130, 110, ...) are then learned from real
+            pixels too, and those whose digits all occur in real crops count as ones the
+            second opinion may choose (0 = none: values without real crops are known from
+            renderings only).
         design_per_kind: rendered crops of every limit in each sign design that painted
             signs lack (LED signs, read inverted as the classifier reads them, and
             yellow-faced signs) and of the end of all restrictions
@@ -355,7 +356,11 @@ def train_from_located(located: LocatedCrops, config: TrainingConfig,
                     aligned_patches(degraded(image, rng), jittered(sign, rng)[None])
                     for image, sign in zip(composites.images, composites.signs)]))
                 patch_labels += list(composites.labels) * 2
-                composite_labels = set(composites.labels)
+                # a value counts as learned from real pixels where all its digits were
+                # real; one with a rendered digit (no real donor) stays a rendered class
+                composite_labels = {label for label in composites.labels} - {
+                    label for label, rendered in zip(composites.labels,
+                                                     composites.rendered_digits) if rendered}
         if rendered is not None:
             usable = np.isfinite(rendered.signs[:, 0])
             patch_sets.append(np.concatenate(
