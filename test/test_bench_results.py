@@ -9,27 +9,14 @@ text from a saved results.json.
 from __future__ import annotations
 
 import copy
-import importlib
 import json
 import re
-import sys
 from pathlib import Path
 from types import ModuleType
 from typing import Any
 
 import pytest
-
-BENCH_DIR = Path(__file__).resolve().parents[1] / 'bench'
-
-
-def bench_module(name: str) -> ModuleType:
-    """A script of bench/ imported as a module (bench/ is a folder of scripts)."""
-    sys.path.insert(0, str(BENCH_DIR))
-    try:
-        return importlib.import_module(name)
-    finally:
-        sys.path.remove(str(BENCH_DIR))
-
+from test_bench_smoke import bench_module
 
 @pytest.fixture(scope='module')
 def markdown() -> ModuleType:
