@@ -5,6 +5,7 @@ import pytest
 
 from speed_sign_detector.tools.eval_bag import (
     DRIVE_COUNT_KEYS,
+    EARLY_RECOGNITION_S,
     LimitEvent,
     drive_metrics,
     score_drive,
@@ -95,6 +96,27 @@ def test_end_of_limit_recognitions_are_matched_to_end_of_limit_signs() -> None:
     assert score.wrong_end_of_limits == 2
     assert score.wrong_limits == 0 and score.recall == 1.0
     assert score.outcomes[0].wrong_values == [0]
+
+
+def test_a_sign_read_just_before_it_is_listed_counts_for_it() -> None:
+    """The truth lists a sign from 5 px and 3/4 inside the image; read a few frames
+    earlier, its value (or its end) counts for it, not as a wrong answer on the sign in
+    view; earlier than EARLY_RECOGNITION_S, or another value, it does not."""
+    tracks = group_tracks(sign_rows(1, '20', 20, 0, 60)
+                          + sign_rows(2, 'end_of_limit_20', 0, 43, 60, x_px=500.0)
+                          + sign_rows(3, '70', 70, 80, 95, x_px=300.0))
+    early = round(EARLY_RECOGNITION_S * FPS)
+    events = [LimitEvent(STAMPS[5], 20), LimitEvent(STAMPS[43 - early + 1], 0),
+              LimitEvent(STAMPS[80 - early + 1], 70)]
+    score = score_drive(tracks, events, STAMPS, grace_s=0.0)
+    assert (score.end_of_limit_recognized, score.wrong_end_of_limits) == (1, 0)
+    assert score.recognized == 2 and score.wrong_limits == 0
+    too_early = score_drive(tracks, [LimitEvent(STAMPS[5], 20),
+                                     LimitEvent(STAMPS[43 - early - 3], 0)], STAMPS, grace_s=0.0)
+    assert (too_early.end_of_limit_recognized, too_early.wrong_end_of_limits) == (0, 1)
+    assert too_early.outcomes[0].wrong_values == [0]
+    other = score_drive(tracks, [LimitEvent(STAMPS[80 - early + 1], 30)], STAMPS, grace_s=0.0)
+    assert other.recognized == 0 and other.wrong_limits == 1
 
 
 def test_metrics_of_many_drives_are_their_counts_summed() -> None:

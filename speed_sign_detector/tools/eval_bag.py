@@ -123,6 +123,10 @@ if TYPE_CHECKING:
 
 #: Default grace after a sign left the image within which recognizing it still counts, s.
 DEFAULT_GRACE_S = 1.0
+#: How long before a sign's first listed frame recognizing its value (or its end of limit)
+#: still counts for it, s: the truth lists a sign from 5 px and 3/4 inside the image, and
+#: a sign can be read a few frames before that.
+EARLY_RECOGNITION_S = 0.5
 #: File endings a contact sheet may have.
 CONTACT_SHEET_SUFFIXES: tuple[str, ...] = ('.png', '.jpg', '.jpeg')
 #: Per-sign counts of a drive's summary that add up over drives (with ``drive_time_s``).
@@ -275,6 +279,9 @@ def score_drive(tracks: Sequence[TruthTrack], events: Sequence[LimitEvent],
         frame_stamps_s: stamps of the processed frames, seconds (ascending); truth signs
             that first appear after the last processed frame are not counted.
         grace_s: a recognition up to this long after a sign's last visible frame counts.
+            A recognition of a sign's own value (or of an end of limit for an end-of-limit
+            sign) up to :data:`EARLY_RECOGNITION_S` before its first listed frame counts
+            for it when no sign in view explains it.
         stopped_early: the frames end before the recording does (a truncated bag, Ctrl-C):
             signs not recognized whose time to be recognized (visible, then ``grace_s``)
             reaches past the last processed frame are cut (``SignOutcome.cut``), counted
@@ -298,8 +305,12 @@ def score_drive(tracks: Sequence[TruthTrack], events: Sequence[LimitEvent],
         in_view = [track for track in seen
                    if track.first_stamp_s - tolerance_s <= event.stamp_s
                    <= track.last_stamp_s + grace_s]
+        coming = [track for track in seen
+                  if track.first_stamp_s - EARLY_RECOGNITION_S <= event.stamp_s
+                  < track.first_stamp_s - tolerance_s]
         if event.limit_kmh == 0:
-            ends = [track for track in in_view if track.is_end_of_limit]
+            ends = [track for track in in_view if track.is_end_of_limit] or \
+                [track for track in coming if track.is_end_of_limit]
             if ends:
                 best = min(ends, key=lambda track: _distance_px(track, event))
                 outcomes[best.track_id].recognized = True
@@ -309,7 +320,8 @@ def score_drive(tracks: Sequence[TruthTrack], events: Sequence[LimitEvent],
                     nearest = min(in_view, key=lambda track: _distance_px(track, event))
                     outcomes[nearest.track_id].wrong_values.append(0)
             continue
-        matches = [track for track in in_view if track.limit_kmh == event.limit_kmh]
+        matches = [track for track in in_view if track.limit_kmh == event.limit_kmh] or \
+            [track for track in coming if track.limit_kmh == event.limit_kmh]
         if matches:
             best = min(matches, key=lambda track: (_distance_px(track, event),
                                                    outcomes[track.track_id].recognized,
