@@ -358,7 +358,7 @@ def train_from_located(located: LocatedCrops, config: TrainingConfig,
                 patch_labels += list(composites.labels) * 2
                 # a value counts as learned from real pixels where all its digits were
                 # real; one with a rendered digit (no real donor) stays a rendered class
-                composite_labels = {label for label in composites.labels} - {
+                composite_labels = set(composites.labels) - {
                     label for label, rendered in zip(composites.labels,
                                                      composites.rendered_digits) if rendered}
         if rendered is not None:
