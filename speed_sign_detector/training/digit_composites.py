@@ -78,6 +78,14 @@ class DigitBox:
 
 
 @functools.lru_cache(maxsize=64)
+def _layout_rendering(value: str) -> tuple[np.ndarray, np.ndarray]:
+    """(gray (D, D) float32, alpha (D, D) float32) of ``value`` rendered at
+    :data:`_LAYOUT_DIAMETER_PX`, shared by the digit layout and the rendered ink."""
+    bgr, alpha = render_sign(value, _LAYOUT_DIAMETER_PX)
+    return cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype(np.float32), alpha
+
+
+@functools.lru_cache(maxsize=64)
 def digit_boxes(value: str) -> tuple[DigitBox, ...]:
     """The boxes of ``value``'s digits, left to right, as the renderer lays them out.
 
@@ -92,8 +100,7 @@ def digit_boxes(value: str) -> tuple[DigitBox, ...]:
     """
     if not value.isdigit() or not 1 <= len(value) <= 3:
         raise ValueError(f'a speed-limit value is 1 to 3 digits, got {value!r}')
-    bgr, alpha = render_sign(value, _LAYOUT_DIAMETER_PX)
-    gray = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype(np.float32)
+    gray, alpha = _layout_rendering(value)
     half = _LAYOUT_DIAMETER_PX / 2.0
     rows, columns = np.mgrid[0:_LAYOUT_DIAMETER_PX, 0:_LAYOUT_DIAMETER_PX]
     inside = np.hypot(columns + 0.5 - half, rows + 0.5 - half) < GEOMETRY.ring_inner * half
@@ -215,8 +222,7 @@ class CompositeSet:
 def _rendered_value_ink(value: str) -> np.ndarray:
     """(D, D) float32 ink (0 face, 1 digit) of ``value``'s digits rendered at
     :data:`_LAYOUT_DIAMETER_PX`, nothing outside the inner field."""
-    bgr, _ = render_sign(value, _LAYOUT_DIAMETER_PX)
-    gray = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype(np.float32)
+    gray, _ = _layout_rendering(value)
     white = float(np.mean(GEOMETRY.white_bgr))
     black = float(np.mean(GEOMETRY.black_bgr))
     half = _LAYOUT_DIAMETER_PX / 2.0
