@@ -48,6 +48,11 @@ import numpy as np
 
 from speed_sign_detector.config import ClassifierConfig, load_yaml
 from speed_sign_detector.errors import TrainingDataError, TruthFileError
+from speed_sign_detector.image_files import (
+    UnreadableImage,
+    UnreadableImageError,
+    read_gray_image,
+)
 from speed_sign_detector.labelled_crops import (
     GTSRB_END_OF_80,
     GTSRB_LIMITS_KMH,
@@ -58,11 +63,6 @@ from speed_sign_detector.labelled_crops import (
 from speed_sign_detector.recognition.classifier import Classification, Classifier
 from speed_sign_detector.recognition.crop_framing import CROP_FRAMINGS
 from speed_sign_detector.tools.cli_types import non_negative_integer, positive_integer
-from speed_sign_detector.tools.image_files import (
-    UnreadableImage,
-    UnreadableImageError,
-    read_gray_image,
-)
 from speed_sign_detector.tools.run_control import (
     EXIT_INTERRUPTED,
     ItemProgress,

@@ -36,6 +36,11 @@ from pathlib import Path
 from speed_sign_detector.config import PipelineConfig, load_yaml, parameter_specs
 from speed_sign_detector.detection.detector import Detector
 from speed_sign_detector.errors import InvalidFrameError, TruthFileError
+from speed_sign_detector.image_files import (
+    UnreadableImage,
+    UnreadableImageError,
+    read_gray_image,
+)
 from speed_sign_detector.recognition.classifier import Classification, Classifier
 from speed_sign_detector.scene_truth import (
     count_false_limits,
@@ -45,11 +50,6 @@ from speed_sign_detector.scene_truth import (
     scene_image_files,
 )
 from speed_sign_detector.tools.cli_types import integer_in_range, non_negative_integer
-from speed_sign_detector.tools.image_files import (
-    UnreadableImage,
-    UnreadableImageError,
-    read_gray_image,
-)
 from speed_sign_detector.tools.run_control import (
     EXIT_INTERRUPTED,
     ItemProgress,

@@ -42,6 +42,7 @@ import numpy as np
 from speed_sign_detector import __version__
 from speed_sign_detector.config import ClassifierConfig, DetectorConfig
 from speed_sign_detector.errors import TrainingDataError
+from speed_sign_detector.image_files import UnreadableImageError, read_gray_image
 from speed_sign_detector.labelled_crops import LabelledCrop, read_crop_folder
 from speed_sign_detector.recognition.classifier import (
     Classification,
@@ -60,7 +61,6 @@ from speed_sign_detector.recognition.templates import (
     gray_template,
 )
 from speed_sign_detector.recognition.trained_bank import NO_BANK_FILE, TrainedBank
-from speed_sign_detector.tools.image_files import UnreadableImageError, read_gray_image
 from speed_sign_detector.training.degradation import degraded, jittered
 from speed_sign_detector.training.digit_composites import digit_composites
 from speed_sign_detector.training.filter_fitting import train_real_filters

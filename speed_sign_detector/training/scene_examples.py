@@ -36,6 +36,7 @@ from speed_sign_detector.config import DetectorConfig
 from speed_sign_detector.detection.candidates import Candidate
 from speed_sign_detector.detection.detector import Detector
 from speed_sign_detector.errors import InvalidFrameError, TrainingDataError, TruthFileError
+from speed_sign_detector.image_files import UnreadableImageError, read_gray_image
 from speed_sign_detector.labelled_crops import GTSRB_CLASS_NAMES
 from speed_sign_detector.recognition.classifier import Classifier, CorrelationEvidence
 from speed_sign_detector.recognition.sign_features import (
@@ -44,7 +45,6 @@ from speed_sign_detector.recognition.sign_features import (
     sign_features,
 )
 from speed_sign_detector.scene_truth import SceneSign, read_gtsdb_truth, scene_image_files
-from speed_sign_detector.tools.image_files import UnreadableImageError, read_gray_image
 from speed_sign_detector.training.degradation import degraded, jittered
 
 __all__ = ['MAX_RADIUS_ERROR', 'SCENE_BACKGROUND_LABEL', 'DetectedScene', 'SceneExamples',
