@@ -42,6 +42,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from speed_sign_detector.config import PipelineConfig, load_yaml
+from speed_sign_detector.tools.cli_types import (
+    non_negative_integer,
+    number_in_range,
+    positive_integer,
+)
 from speed_sign_detector.tools.eval_bag import add_pipeline_options
 from speed_sign_detector.tools.fleet_jobs import (
     BagJob,
@@ -376,14 +381,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help='output folder (created; reuse it to resume)')
     parser.add_argument('--address', help='Ray cluster to join (HOST:PORT or "auto"; '
                         'default: $RAY_ADDRESS, else start Ray on this machine)')
-    parser.add_argument('--workers', type=int, help='worker processes (default: the '
-                        'cluster\'s CPUs, at most one per bag)')
-    parser.add_argument('--retries', type=int, default=DEFAULT_RETRIES,
+    parser.add_argument('--workers', type=positive_integer, help='worker processes '
+                        '(default: the cluster\'s CPUs, at most one per bag)')
+    parser.add_argument('--retries', type=non_negative_integer, default=DEFAULT_RETRIES,
                         help=f'restarts of a worker process that dies, each retrying its bag '
                         f'(default {DEFAULT_RETRIES})')
-    parser.add_argument('--gpus-per-worker', type=float,
-                        help='GPU share per worker (default: the cluster\'s GPUs divided '
-                        'among the workers, at most 1; 0 without GPUs)')
+    # a share of one GPU: a worker runs one pipeline, on one device
+    parser.add_argument('--gpus-per-worker', type=number_in_range(minimum=0.0, maximum=1.0),
+                        help='GPU share per worker, from 0 to 1 (default: the cluster\'s '
+                        'GPUs divided among the workers, at most 1; 0 without GPUs)')
     parser.add_argument('--topic', help='image topic (needed when a bag has several)')
     add_pipeline_options(parser)
     parser.add_argument('--debug-images', action='store_true',
@@ -398,8 +404,6 @@ def run(args: argparse.Namespace) -> int:
     """Execute ``speed_sign_eval fleet``; returns the exit status."""
     if not args.bags and args.manifest is None:
         raise FleetError('give bags (paths or glob patterns) or --manifest CSV')
-    if args.retries < 0 or (args.workers is not None and args.workers < 1):
-        raise FleetError('--retries must be >= 0 and --workers >= 1')
     config = load_yaml(args.config) if args.config is not None else PipelineConfig()
     if args.backend is not None:
         config = dataclasses.replace(config, backend=args.backend)
