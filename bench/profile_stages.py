@@ -29,8 +29,8 @@ BENCH_DIR = Path(__file__).resolve().parent
 if str(BENCH_DIR) not in sys.path:
     sys.path.insert(0, str(BENCH_DIR))
 
-import bench_classifier  # noqa: F401  (run_all imports it too)
-import run_all
+import bench_classifier  # noqa: F401  (run_all_stages imports it too)
+import run_all_stages
 
 from speed_sign_detector.config import DetectorConfig
 from speed_sign_detector.detection.detector import Detector
@@ -57,13 +57,14 @@ def _profiled(call: Callable[[Any], object], items: Sequence[Any]) -> cProfile.P
 
 def profile_detector(backend: str, size_name: str, frames: int, lines: int) -> None:
     """Profile ``Detector.detect`` on ``frames`` of run_all's GTSDB frames."""
-    size = next(s for s in run_all.DETECTOR_SIZES if s[0] == size_name)
-    folder = run_all.DATA_DIR / 'gtsdb-dev'
+    size = next(s for s in run_all_stages.DETECTOR_SIZES if s[0] == size_name)
+    folder = run_all_stages.DATA_DIR / 'gtsdb-dev'
     truth = read_gtsdb_truth(folder / 'gt.txt')
-    files = run_all._spaced(sorted(n for n, signs in truth.items()
-                                   if any(s.limit_kmh for s in signs)), frames)
-    images = [run_all._frame_at(cv2.imread(str(folder / 'images' / name), cv2.IMREAD_GRAYSCALE),
-                                truth[name], size[1], size[2], size[3])[0] for name in files]
+    files = run_all_stages._spaced(sorted(n for n, signs in truth.items()
+                                          if any(s.limit_kmh for s in signs)), frames)
+    images = [run_all_stages._frame_at(
+        cv2.imread(str(folder / 'images' / name), cv2.IMREAD_GRAYSCALE),
+        truth[name], size[1], size[2], size[3])[0] for name in files]
     with Detector(DetectorConfig(), backend=backend) as detector:
         detector.detect(images[0])  # warm-up outside the profile
         profile = _profiled(detector.detect, images)
@@ -80,9 +81,9 @@ def profile_detector(backend: str, size_name: str, frames: int, lines: int) -> N
 
 def profile_classifier(crops: int, lines: int, params: Path | None) -> None:
     """Profile ``Classifier.classify_crop`` on ``crops`` GTSRB crops (evenly spaced)."""
-    settings = run_all.BenchSettings(out_dir=Path('.'), pipeline_params=params)
-    classifier = Classifier(run_all.pipeline_config(settings).classifier)
-    labels, _ = read_labels(run_all.DATA_DIR / 'gtsrb-dev')
+    settings = run_all_stages.BenchSettings(out_dir=Path('.'), pipeline_params=params)
+    classifier = Classifier(run_all_stages.pipeline_config(settings).classifier)
+    labels, _ = read_labels(run_all_stages.DATA_DIR / 'gtsrb-dev')
     labels = labels[::max(1, len(labels) // crops)][:crops]
     images = [cv2.imread(str(label.path), cv2.IMREAD_GRAYSCALE) for label in labels]
     classifier.classify_crop(images[0])
@@ -96,11 +97,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('stage', choices=('detector', 'classifier'))
     parser.add_argument('--backend', choices=('gl', 'numpy'), default='gl')
     parser.add_argument('--size', default='816x480',
-                        choices=[size[0] for size in run_all.DETECTOR_SIZES])
+                        choices=[size[0] for size in run_all_stages.DETECTOR_SIZES])
     parser.add_argument('--frames', type=int, default=8)
     parser.add_argument('--crops', type=int, default=200)
     parser.add_argument('--lines', type=int, default=18)
-    parser.add_argument('--params', default=str(run_all.bench_inputs.PARAMS_FILE),
+    parser.add_argument('--params', default=str(run_all_stages.bench_inputs.PARAMS_FILE),
                         help="classifier parameter file, as run_all.py --params")
     args = parser.parse_args(argv)
     if args.stage == 'detector':
