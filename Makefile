@@ -53,5 +53,16 @@ bank: $(INSTALLED)
 bench: $(INSTALLED)
 	$(BIN)/python bench/run_all.py --out $(OUT)/bench --results-md bench/RESULTS.md
 
+## soak: the node fed at 30 Hz by a looping 1280x720 drive for SOAK_MINUTES (an hour): its
+## memory every 10 s, every frame answered or counted as dropped, errors, the stamps jumping
+## back at each loop without a restart; out/soak/soak.json, rss.csv and the node's log
+SOAK_MINUTES ?= 60
+.PHONY: soak
+soak: $(INSTALLED)
+	rm -rf $(OUT)/soak && mkdir -p $(OUT)/soak
+	$(BIN)/python bench/bench_soak.py --minutes $(SOAK_MINUTES) --width 1280 --height 720 \
+		--rss-csv $(OUT)/soak/rss.csv --node-log $(OUT)/soak/node.log \
+		--json > $(OUT)/soak/soak.json
+
 clean:
 	rm -rf $(VENV) build install log $(OUT) *.egg-info

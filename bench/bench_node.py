@@ -33,8 +33,11 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import IO, TypeVar
 
 import numpy as np
 import rclpy
@@ -54,6 +57,14 @@ from bench_inputs import DDS_PROFILE, PARAMS_FILE, drive_frames
 from speed_sign_detector.ros.messages import image_message
 TARGET_FPS = 30.0
 TARGET_RSS_MB = 400.0
+#: Longest wait for the node to subscribe and publish its first speed limit, seconds.
+NODE_START_TIMEOUT_S = 300.0
+#: Longest wait for the node to exit after SIGINT before it is killed, seconds.
+NODE_STOP_TIMEOUT_S = 30.0
+
+
+class NodeBenchError(Exception):
+    """The node could not be started or did not come up; the message says why."""
 
 
 @dataclass(frozen=True)
@@ -177,16 +188,10 @@ def run_rate(client: BenchClient, pid: int, rate_hz: float, seconds: float) -> R
         rss_mb=rss)
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('--rates', type=float, nargs='+', default=[30.0, 60.0],
-                        help='publishing rates in Hz, run in order')
-    parser.add_argument('--seconds', type=float, default=10.0, help='duration per rate')
-    parser.add_argument('--width', type=int, default=640)
-    parser.add_argument('--height', type=int, default=480)
-    parser.add_argument('--frames', type=int, default=120,
-                        help='distinct synthetic-drive frames, published in a loop')
-    parser.add_argument('--domain-id', type=int, default=97)
+def add_node_arguments(parser: argparse.ArgumentParser, domain_id: int) -> None:
+    """The options saying how the node is started: ``--domain-id``, ``--bank-cache``,
+    ``--node-arg``, ``--dds-profile``, and ``--json``."""
+    parser.add_argument('--domain-id', type=int, default=domain_id)
     parser.add_argument('--bank-cache', default=str(Path(tempfile.gettempdir())
                                                     / 'speed_sign_detector_banks'),
                         help='classifier filter-bank cache folder')
@@ -197,64 +202,123 @@ def main(argv: list[str] | None = None) -> int:
                         'FASTRTPS_DEFAULT_PROFILES_FILE is set ("" = Fast DDS defaults, '
                         'which lose large best-effort frames)')
     parser.add_argument('--json', action='store_true', help='print one JSON object last')
-    args = parser.parse_args(argv)
-    if args.dds_profile and 'FASTRTPS_DEFAULT_PROFILES_FILE' not in os.environ:
-        os.environ['FASTRTPS_DEFAULT_PROFILES_FILE'] = args.dds_profile
 
-    found = shutil.which('speed_sign_detector', path=os.pathsep.join(
+
+def installed_executable(name: str) -> str:
+    """The path of console script ``name`` (beside this interpreter, else on PATH).
+
+    Raises:
+        NodeBenchError: when it is not installed.
+    """
+    found = shutil.which(name, path=os.pathsep.join(
         [str(Path(sys.executable).parent), os.environ.get('PATH', '')]))
     if found is None:
-        print('speed_sign_detector is not installed (pip install -e .)', file=sys.stderr)
-        return 1
-    environment = dict(os.environ, ROS_DOMAIN_ID=str(args.domain_id))
-    command = [found, '--ros-args', '--params-file', str(PARAMS_FILE),
-               '-p', f'classifier.cache_dir:={args.bank_cache}', *args.node_arg]
-    node_process = subprocess.Popen(command, env=environment, stdout=subprocess.DEVNULL,
-                                    stderr=sys.stderr)
+        raise NodeBenchError(f'{name} is not installed (pip install -e .)')
+    return found
+
+
+ClientType = TypeVar('ClientType', bound=BenchClient)
+
+
+@contextmanager
+def node_and_client(args: argparse.Namespace, make_client: Callable[[], ClientType],
+                    node_output: IO[str] | None = None,
+                    node_environment: Mapping[str, str] | None = None
+                    ) -> Iterator[tuple[subprocess.Popen, ClientType]]:
+    """The installed node as its own process and a client spinning on a thread beside it.
+
+    Starts ``speed_sign_detector`` (the package's parameter file, the bank cache and
+    ``args.node_arg``; ROS domain ``args.domain_id``), then ``make_client()`` in this
+    process, and waits until the node subscribes to the client's publisher and has
+    published its first speed limit. On leaving, the node gets SIGINT (killed after
+    :data:`NODE_STOP_TIMEOUT_S`), then the client's executor, node and context stop.
+
+    Args:
+        args: parsed options of :func:`add_node_arguments`.
+        make_client: builds the client (called after ``rclpy.init``).
+        node_output: where the node's stdout and stderr go (default: stdout discarded,
+            stderr to this process's stderr).
+        node_environment: variables added to the node's environment.
+
+    Raises:
+        NodeBenchError: the node is not installed, exited, or did not come up within
+            :data:`NODE_START_TIMEOUT_S`.
+    """
+    if args.dds_profile and 'FASTRTPS_DEFAULT_PROFILES_FILE' not in os.environ:
+        os.environ['FASTRTPS_DEFAULT_PROFILES_FILE'] = args.dds_profile
+    environment = dict(os.environ, **(node_environment or {}),
+                       ROS_DOMAIN_ID=str(args.domain_id))
+    command = [installed_executable('speed_sign_detector'), '--ros-args', '--params-file',
+               str(PARAMS_FILE), '-p', f'classifier.cache_dir:={args.bank_cache}',
+               *args.node_arg]
+    node_process = subprocess.Popen(
+        command, env=environment,
+        stdout=subprocess.DEVNULL if node_output is None else node_output,
+        stderr=sys.stderr if node_output is None else subprocess.STDOUT)
     os.environ['ROS_DOMAIN_ID'] = str(args.domain_id)
     rclpy.init(args=[])
-    client = BenchClient(drive_frames(args.width, args.height, args.frames))
+    client = make_client()
     executor = SingleThreadedExecutor()
     executor.add_node(client)
     spinner = threading.Thread(target=executor.spin, daemon=True)
     spinner.start()
-    results: list[RateResult] = []
     try:
         started = time.monotonic()
         while not client.limits or client.publisher.get_subscription_count() == 0:
             if node_process.poll() is not None:
-                print(f'node exited with {node_process.returncode}', file=sys.stderr)
-                return 1
-            if time.monotonic() - started > 300:
-                print('node did not come up within 300 s', file=sys.stderr)
-                return 1
+                raise NodeBenchError(f'node exited with {node_process.returncode}')
+            if time.monotonic() - started > NODE_START_TIMEOUT_S:
+                raise NodeBenchError(f'node did not come up within '
+                                     f'{NODE_START_TIMEOUT_S:.0f} s')
             time.sleep(0.1)
         print(f'node up after {time.monotonic() - started:.1f} s; idle RSS '
               f'{resident_mb(node_process.pid):.0f} MiB', file=sys.stderr)
-        run_rate(client, node_process.pid, 30.0, 2.0)  # warm-up
-        for rate in args.rates:
-            result = run_rate(client, node_process.pid, rate, args.seconds)
-            results.append(result)
-            print(f'{rate:5.0f} Hz: {result.output_fps:5.1f} fps out, latency p50 '
-                  f'{result.latency_p50_ms:6.1f} ms p95 {result.latency_p95_ms:6.1f} ms, '
-                  f'{result.dropped}/{result.published} unanswered (node received '
-                  f'{result.node_received}, dropped {result.node_frames_dropped}, saw '
-                  f'{result.node_lost_in_transport} lost in transport), '
-                  f'pipeline p50 {result.pipeline_total_p50_ms:.0f} ms ('
-                  + ', '.join(f'{stage} {value:.0f}' for stage, value
-                              in result.pipeline_stage_p50_ms.items() if stage != 'total')
-                  + '), '
-                  f'RSS {result.rss_mb:.0f} MiB', file=sys.stderr)
+        yield node_process, client
     finally:
         node_process.send_signal(signal.SIGINT)
         try:
-            node_process.wait(timeout=30)
+            node_process.wait(timeout=NODE_STOP_TIMEOUT_S)
         except subprocess.TimeoutExpired:
             node_process.kill()
+            node_process.wait()
         executor.shutdown()
         spinner.join(timeout=10)   # a spinning thread left at exit aborts the process
         client.destroy_node()
         rclpy.try_shutdown()
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--rates', type=float, nargs='+', default=[30.0, 60.0],
+                        help='publishing rates in Hz, run in order')
+    parser.add_argument('--seconds', type=float, default=10.0, help='duration per rate')
+    parser.add_argument('--width', type=int, default=640)
+    parser.add_argument('--height', type=int, default=480)
+    parser.add_argument('--frames', type=int, default=120,
+                        help='distinct synthetic-drive frames, published in a loop')
+    add_node_arguments(parser, domain_id=97)
+    args = parser.parse_args(argv)
+    results: list[RateResult] = []
+    try:
+        with node_and_client(args, lambda: BenchClient(
+                drive_frames(args.width, args.height, args.frames))) as (node_process, client):
+            run_rate(client, node_process.pid, 30.0, 2.0)  # warm-up
+            for rate in args.rates:
+                result = run_rate(client, node_process.pid, rate, args.seconds)
+                results.append(result)
+                print(f'{rate:5.0f} Hz: {result.output_fps:5.1f} fps out, latency p50 '
+                      f'{result.latency_p50_ms:6.1f} ms p95 {result.latency_p95_ms:6.1f} ms, '
+                      f'{result.dropped}/{result.published} unanswered (node received '
+                      f'{result.node_received}, dropped {result.node_frames_dropped}, saw '
+                      f'{result.node_lost_in_transport} lost in transport), '
+                      f'pipeline p50 {result.pipeline_total_p50_ms:.0f} ms ('
+                      + ', '.join(f'{stage} {value:.0f}' for stage, value
+                                  in result.pipeline_stage_p50_ms.items() if stage != 'total')
+                      + '), '
+                      f'RSS {result.rss_mb:.0f} MiB', file=sys.stderr)
+    except NodeBenchError as err:
+        print(err, file=sys.stderr)
+        return 1
     summary = {
         'width': args.width, 'height': args.height,
         'backend': client.diagnostics.get('backend', ''),

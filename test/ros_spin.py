@@ -28,6 +28,7 @@ _MODULE_DOMAINS: dict[str, tuple[int, int]] = {
     'test_lifecycle_node': (95, 3),
     'test_monitor_output': (98, 1),
     'test_stage_timing': (100, 1),
+    'test_bench_soak': (99, 1),
 }
 
 
