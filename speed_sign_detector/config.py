@@ -378,8 +378,13 @@ class TrackerConfig:
 class PipelineConfig:
     """Everything the pipeline needs: one config per stage plus the backend choice."""
 
-    backend: str = setting('auto', 'Voting backend: auto (GL, numpy if no GL context), '
-                           'gl, or numpy.', choices=('auto', 'gl', 'numpy'))
+    backend: str = setting(
+        'auto', 'Detector backend: gl (OpenGL compute passes), cpu (OpenCV edges and '
+        'vectorised voting on the CPU; the reference\'s votes to 0.2 %), numpy (the '
+        'reference, slow), or auto: gl on a hardware GPU; on a software OpenGL renderer '
+        '(Mesa llvmpipe) both gl and cpu detect the first 6 frames and the faster is kept '
+        '(logged, and in /diagnostics as backend_choice); cpu when no OpenGL context can be '
+        'made.', choices=('auto', 'gl', 'cpu', 'numpy'))
     classify: bool = setting(True, 'Run the classifier on the candidates (off: detection '
                              'only).')
     classifier_process: bool = setting(

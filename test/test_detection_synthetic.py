@@ -291,7 +291,7 @@ def test_radius_reported_as_outer_radius() -> None:
         assert outer.detect(frame)[0].radius_px == pytest.approx(15.0, rel=0.1)
 
 
-def test_auto_falls_back_to_numpy_when_gl_is_unavailable(
+def test_auto_falls_back_to_the_cpu_path_when_gl_is_unavailable(
         monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
     from speed_sign_detector.detection import voting_gl
 
@@ -301,11 +301,12 @@ def test_auto_falls_back_to_numpy_when_gl_is_unavailable(
     monkeypatch.setattr(voting_gl.GLVoter, '__init__', no_context)
     with (caplog.at_level('WARNING', logger='speed_sign_detector.detection.detector'),
           Detector(DetectorConfig(), backend='auto') as detector):
-        assert detector.backend_name == 'numpy'
-        assert detector.renderer == 'numpy reference'
+        assert detector.backend_name == 'cpu'
+        assert detector.vote_method == 'stencil'
         assert 'EGL' in (detector.fallback_reason or '')
+        assert 'GL unavailable' in detector.backend_choice
         assert detector.detect(ring_frame(200, 160, (100.0, 80.0), 12.0))
-    assert 'numpy reference' in caplog.text
+    assert 'using the CPU path' in caplog.text
     with pytest.raises(DetectorError, match='EGL'):
         Detector(DetectorConfig(), backend='gl')
 
@@ -354,6 +355,7 @@ def test_cpu_detector_advice_names_the_costly_settings() -> None:
                       'detector.vote_pixels_per_radius:=1.75', 'CPU-only hosts'):
         assert parameter in advice
     assert cpu_detector_advice('numpy', 'numpy reference', defaults) is not None
+    assert cpu_detector_advice('cpu', 'CPU (OpenCV and numpy)', defaults) is not None
     assert cpu_detector_advice('gl', 'NVIDIA H100 80GB HBM3/PCIe/SSE2', defaults) is None
     frugal = DetectorConfig(polarity='bright_inside', vote_pixels_per_radius=1.75)
     assert cpu_detector_advice('gl', 'llvmpipe (LLVM 15.0.6, 256 bits)', frugal) is None

@@ -1,10 +1,13 @@
-"""The detector facade: validation, backend choice (GL or numpy), candidates.
+"""The detector facade: validation, backend choice (GL, CPU or numpy), candidates.
 
 ``Detector(config, backend='auto')`` runs the radial-symmetry detector of IVS 2011 on
 grayscale frames and returns up to ``config.max_candidates`` :class:`Candidate`, best
-first. ``backend='auto'`` uses the GL backend and falls back to the numpy reference
-when no OpenGL context can be created (the reason is logged and kept in
-``fallback_reason``).
+first. Backends: ``'gl'`` (moderngl compute passes), ``'cpu'`` (OpenCV edges and
+vectorised stencil voting, :mod:`.gradients_cpu` and :mod:`.voting_cpu`), ``'numpy'``
+(the reference the others are compared to in tests). ``'auto'`` keeps GL on a hardware
+renderer; on a software one (llvmpipe) it times GL and CPU on the first frames and keeps
+the faster (:mod:`.backend_trial`); with no OpenGL context it uses the CPU path (the
+reason is logged and kept in ``fallback_reason``). ``backend_choice`` says which and why.
 
 Working resolution: a frame wider than ``config.detection_width_px`` is scaled down to
 that width (``cv2.INTER_AREA``) before voting, and only the band of rows between
@@ -23,6 +26,7 @@ import cv2
 import numpy as np
 
 from speed_sign_detector.config import DetectorConfig
+from speed_sign_detector.detection.backend_trial import BackendTrial, TrialDecision
 from speed_sign_detector.detection.candidates import (
     BlockMaxima,
     Candidate,
@@ -32,6 +36,8 @@ from speed_sign_detector.detection.candidates import (
     select_candidates,
 )
 from speed_sign_detector.detection.gradients import validate_frame
+from speed_sign_detector.detection.gradients_cpu import compute_edges_fast
+from speed_sign_detector.detection.voting_cpu import CPUVoter
 from speed_sign_detector.detection.voting_gl import SOFTWARE_RENDERERS
 from speed_sign_detector.detection.voting_numpy import (
     RadiusBand,
@@ -46,7 +52,10 @@ from speed_sign_detector.errors import ConfigError, DetectorError, InvalidFrameE
 
 LOGGER = logging.getLogger(__name__)
 
-BACKENDS = ('auto', 'gl', 'numpy')
+BACKENDS = ('auto', 'gl', 'cpu', 'numpy')
+#: ``Detector.renderer`` of the CPU path and of the numpy reference.
+CPU_RENDERER = 'CPU (OpenCV and numpy)'
+REFERENCE_RENDERER = 'numpy reference'
 
 #: The detection stages :meth:`Detector.detect_with_stage_times` times, in order:
 #: scaling (validation, region of interest, working resolution), gradients (gray scale,
@@ -136,8 +145,7 @@ def cpu_detector_advice(backend_name: str, renderer: str, config: DetectorConfig
     setting is in use; else one line naming the parameters that trade those signs for
     frame rate.
     """
-    on_cpu = backend_name == 'numpy' or any(name in renderer.lower()
-                                            for name in SOFTWARE_RENDERERS)
+    on_cpu = backend_name in ('cpu', 'numpy') or is_software_renderer(renderer)
     costly = []
     if config.polarity == 'both':
         costly.append('detector.polarity:=bright_inside (and '
@@ -151,19 +159,30 @@ def cpu_detector_advice(backend_name: str, renderer: str, config: DetectorConfig
             f'{"; ".join(costly)} (README, "CPU-only hosts")')
 
 
+def is_software_renderer(renderer: str) -> bool:
+    """True when a GL_RENDERER string names a renderer that runs on the CPU."""
+    return any(name in renderer.lower() for name in SOFTWARE_RENDERERS)
+
+
 class Detector:
     """Radial-symmetry sign detector on one backend.
 
     Args:
         config: detector settings.
-        backend: ``'gl'`` (moderngl, headless EGL), ``'numpy'`` (reference) or ``'auto'``
-            (GL, numpy when no GL context can be created).
+        backend: ``'gl'`` (moderngl, headless EGL), ``'cpu'`` (vectorised CPU path),
+            ``'numpy'`` (reference) or ``'auto'`` (see the module text).
 
     Attributes:
-        backend_name: ``'gl'`` or ``'numpy'``.
-        renderer: the GL_RENDERER string, or ``'numpy reference'``.
-        vote_method: how votes are added: ``'raster'`` or ``'scatter'`` (GL), ``'numpy'``.
-        fallback_reason: why ``'auto'`` fell back to numpy, else None.
+        backend_name: ``'gl'``, ``'cpu'`` or ``'numpy'``: the backend in use (while an
+            ``'auto'`` trial runs, ``'gl'``, whose candidates are returned).
+        renderer: the GL_RENDERER string, :data:`CPU_RENDERER` or
+            :data:`REFERENCE_RENDERER`.
+        vote_method: how votes are added: ``'raster'`` or ``'scatter'`` (GL),
+            ``'stencil'`` (CPU), ``'numpy'``.
+        fallback_reason: why ``'auto'`` could not use GL, else None.
+        backend_choice: one line saying how the backend was chosen (with both times
+            once an ``'auto'`` trial has decided).
+        trial_decision: the decision of the ``'auto'`` trial, None before or without one.
 
     Raises:
         ConfigError: unknown backend name.
@@ -184,7 +203,10 @@ class Detector:
         self.score_normalisers: tuple[float, ...] = tuple(
             score_normaliser(len(vote_signs(config, band))) for band in self.bands)
         self.fallback_reason: str | None = None
+        self.trial_decision: TrialDecision | None = None
         self._gl = None
+        self._cpu: CPUVoter | None = None
+        self._trial: BackendTrial | None = None
         if backend in ('auto', 'gl'):
             try:
                 from speed_sign_detector.detection.voting_gl import GLVoter
@@ -196,20 +218,40 @@ class Detector:
                         raise
                     raise DetectorError(f'GL backend unavailable: {err}') from err
                 self.fallback_reason = str(err)
-                LOGGER.warning('GL detector unavailable (%s); using the numpy reference',
+                LOGGER.warning('GL detector unavailable (%s); using the CPU path',
                                self.fallback_reason)
+        software_gl = self._gl is not None and is_software_renderer(self._gl.renderer)
+        if backend == 'cpu' or (backend == 'auto' and (self._gl is None or software_gl)):
+            self._cpu = CPUVoter(config)
         if self._gl is not None:
             self._gl.profile_stages(True)  # per-stage times (a glFinish between stages)
-            self.backend_name = 'gl'
-            self.renderer = self._gl.renderer
-            self.vote_method = self._gl.vote_method
+            self._use('gl')
+            self.backend_choice = (f'asked for gl ({self._gl.renderer})' if backend == 'gl'
+                                   else f'auto: gl on a hardware renderer ({self.renderer})')
+            if self._cpu is not None:
+                self._trial = BackendTrial(self._gl.renderer)
+                self.backend_choice = (f'auto: timing gl and cpu on the first frames '
+                                       f'({self.renderer} is a software renderer)')
+        elif self._cpu is not None:
+            self._use('cpu')
+            self.backend_choice = ('asked for cpu' if backend == 'cpu' else
+                                   f'auto: cpu, GL unavailable ({self.fallback_reason})')
         else:
-            self.backend_name = 'numpy'
-            self.renderer = 'numpy reference'
-            self.vote_method = 'numpy'
-        LOGGER.info('detector backend: %s (%s), %s voting', self.backend_name, self.renderer,
-                    self.vote_method)
+            self._use('numpy')
+            self.backend_choice = 'asked for numpy (the reference)'
+        LOGGER.info('detector backend: %s (%s), %s voting; %s', self.backend_name,
+                    self.renderer, self.vote_method, self.backend_choice)
         self._closed = False
+
+    def _use(self, backend_name: str) -> None:
+        """Set the attributes that describe the backend in use."""
+        self.backend_name = backend_name
+        if backend_name == 'gl':
+            self.renderer, self.vote_method = self._gl.renderer, self._gl.vote_method
+        elif backend_name == 'cpu':
+            self.renderer, self.vote_method = CPU_RENDERER, 'stencil'
+        else:
+            self.renderer, self.vote_method = REFERENCE_RENDERER, 'numpy'
 
     def detect(self, gray: np.ndarray) -> tuple[Candidate, ...]:
         """Candidates of one (H, W) uint8 frame, best first (at most max_candidates).
@@ -242,8 +284,19 @@ class Detector:
             raise DetectorError('the detector has been closed')
         working = working_frame(validate_frame(gray, 1), self.config, self.min_size_px)
         scaled = time.perf_counter()
-        stage_ms = {'scaling': (scaled - started) * 1e3}
-        if self._gl is not None:
+        if self._trial is not None:
+            found, stage_ms = self._detect_on_trial(working)
+        else:
+            found, stage_ms = self._detect_on(self.backend_name, working)
+        return found, {'scaling': (scaled - started) * 1e3, **stage_ms}
+
+    def _detect_on(self, backend_name: str, working: WorkingFrame
+                   ) -> tuple[tuple[Candidate, ...], dict[str, float]]:
+        """Candidates of a working frame on one backend, in full-resolution pixels, and
+        the milliseconds of its gradients, voting and candidates stages."""
+        started = time.perf_counter()
+        stage_ms: dict[str, float] = {}
+        if backend_name == 'gl':
             self._gl.profile_stages(True)   # forget the last frame's times
             maxima = self._gl.block_maxima(working.image)
             gl_ms = self._gl.stage_ms or {}
@@ -251,14 +304,19 @@ class Detector:
                 stage_ms[stage] = sum(gl_ms.get(part, 0.0) for part in parts)
             voted = time.perf_counter()
         else:
-            edges = compute_edges(working.image, self.config)
-            edged = time.perf_counter()
             frame_size = (working.image.shape[1], working.image.shape[0])
-            tent = self.config.vote_profile == 'tent'
-            votes = [vote_band(edges[band.level], band, vote_signs(self.config, band),
-                               frame_size, tent) for band in self.bands]
+            if backend_name == 'cpu':
+                edges = compute_edges_fast(working.image, self.config)
+                edged = time.perf_counter()
+                votes = self._cpu.vote_images(edges, frame_size)
+            else:
+                edges = compute_edges(working.image, self.config)
+                edged = time.perf_counter()
+                tent = self.config.vote_profile == 'tent'
+                votes = [vote_band(edges[band.level], band, vote_signs(self.config, band),
+                                   frame_size, tent) for band in self.bands]
             voted = time.perf_counter()
-            stage_ms['gradients'] = (edged - scaled) * 1e3
+            stage_ms['gradients'] = (edged - started) * 1e3
             stage_ms['voting'] = (voted - edged) * 1e3
             maxima = block_maxima(votes, self.bands, working.image.shape,
                                   self.config.block_size_px, self.score_normalisers)
@@ -272,13 +330,38 @@ class Detector:
         stage_ms['candidates'] += (time.perf_counter() - voted) * 1e3
         return found, stage_ms
 
+    def _detect_on_trial(self, working: WorkingFrame
+                         ) -> tuple[tuple[Candidate, ...], dict[str, float]]:
+        """Detect with both GL and CPU (see :mod:`.backend_trial`), return GL's result;
+        once the trial decides, keep the faster (the GL context is released when the CPU
+        path wins)."""
+        results: dict[str, tuple[tuple[Candidate, ...], dict[str, float]]] = {}
+        times_ms: dict[str, float] = {}
+        for backend_name in self._trial.order():
+            started = time.perf_counter()
+            results[backend_name] = self._detect_on(backend_name, working)
+            times_ms[backend_name] = (time.perf_counter() - started) * 1e3
+        decision = self._trial.record(times_ms)
+        if decision is not None:
+            self._trial = None
+            self.trial_decision = decision
+            self.backend_choice = decision.describe()
+            if decision.backend == 'cpu':
+                self._gl.close()
+                self._gl = None
+            else:
+                self._cpu = None
+            self._use(decision.backend)
+            LOGGER.info('detector backend chosen: %s', self.backend_choice)
+        return results['gl']
+
     def block_maxima(self, gray: np.ndarray) -> BlockMaxima:
         """The per-block best vote pixels of a frame as given (before top-N selection;
         radii are voting radii; no working resolution or region of interest)."""
         frame = self._check(gray)
         if self._gl is not None:
             return self._gl.block_maxima(frame)
-        return block_maxima(vote_images(frame, self.config), self.bands, frame.shape,
+        return block_maxima(self._cpu_vote_images(frame), self.bands, frame.shape,
                             self.config.block_size_px, self.score_normalisers)
 
     def vote_images(self, gray: np.ndarray) -> list[np.ndarray]:
@@ -293,6 +376,13 @@ class Detector:
         frame = self._check(gray)
         if self._gl is not None:
             return self._gl.vote_images(frame)
+        return self._cpu_vote_images(frame)
+
+    def _cpu_vote_images(self, frame: np.ndarray) -> list[np.ndarray]:
+        """Vote images of the CPU path, or of the reference when it is the backend."""
+        if self._cpu is not None:
+            return self._cpu.vote_images(compute_edges_fast(frame, self.config),
+                                         (frame.shape[1], frame.shape[0]))
         return vote_images(frame, self.config)
 
     def score_map(self, gray: np.ndarray) -> np.ndarray:
