@@ -152,8 +152,16 @@ class Pipeline:
 
     @property
     def backend_name(self) -> str:
-        """Voting backend in use: ``'gl'`` or ``'numpy'``."""
+        """Detector backend in use: ``'gl'``, ``'cpu'`` or ``'numpy'`` (with ``auto`` on a
+        software renderer it may change after the first frames: see
+        :attr:`backend_choice`)."""
         return self._live_detector().backend_name
+
+    @property
+    def backend_choice(self) -> str:
+        """How the detector backend was chosen, in one line (``auto``: with the times of
+        GL and CPU on the first frames, once they are known)."""
+        return self._live_detector().backend_choice
 
     @property
     def renderer(self) -> str:
@@ -162,7 +170,8 @@ class Pipeline:
 
     @property
     def vote_method(self) -> str:
-        """How votes are added: ``'raster'`` or ``'scatter'`` (GL), ``'numpy'``."""
+        """How votes are added: ``'raster'`` or ``'scatter'`` (GL), ``'stencil'`` (CPU),
+        ``'numpy'``."""
         return self._live_detector().vote_method
 
     @property

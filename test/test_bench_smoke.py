@@ -127,7 +127,7 @@ def test_classifier_and_pipeline_sections(results: dict) -> None:
     pipeline = results['returned']['pipeline']
     assert pipeline['frames'] == 3 and pipeline['fps'] > 0
     assert {'detect', 'classify', 'track', 'total'} <= set(pipeline['stage_p50_ms'])
-    assert pipeline['backend'] in {'gl', 'numpy'}
+    assert pipeline['backend'] in {'gl', 'cpu', 'numpy'}
 
 
 def test_run_all_without_the_node_stage_needs_no_rclpy() -> None:

@@ -139,6 +139,7 @@ class DetectorNodeBase:
         self._renderer = ''
         self._vote_method = ''
         self._fallback_reason: str | None = None
+        self._backend_choice = ''
         self._classifier_location = 'off'
         self._last_tick = (time.monotonic(), 0)
         self._published_limit_kmh: int | None = None
@@ -250,7 +251,7 @@ class DetectorNodeBase:
         self.get_logger().info(
             f'listening on {self._image_sub.topic_name} and {self._compressed_sub.topic_name} '
             f'({describe_qos(self._image_sub.qos_profile)}); voting backend {self._backend} '
-            f'({self._renderer}, {self._vote_method} voting)'
+            f'({self._renderer}, {self._vote_method} voting; {self._backend_choice})'
             + (f', GL not used because {self._fallback_reason}' if self._fallback_reason
                else ''))
         advice = cpu_detector_advice(self._backend, self._renderer,
@@ -422,6 +423,7 @@ class DetectorNodeBase:
                 'gl_renderer': self._renderer,
                 'vote_method': self._vote_method,
                 'gl_fallback_reason': self._fallback_reason or '',
+                'backend_choice': self._backend_choice,
                 'classifier': self._classifier_location,
                 'last_error': last_error,
             })
@@ -506,6 +508,9 @@ class DetectorNodeBase:
                     self._reconfigure(pipeline, config)
                 if frame is not None:
                     self._process(stages, frame)
+                    if pipeline.backend_choice != self._backend_choice:  # auto decided
+                        self._note_backend(pipeline)
+                        self.get_logger().info(f'detector backend {self._backend_choice}')
         finally:
             stages.close()
             pipeline.close()
@@ -529,6 +534,7 @@ class DetectorNodeBase:
         self._backend, self._renderer = pipeline.backend_name, pipeline.renderer
         self._vote_method = pipeline.vote_method
         self._fallback_reason = pipeline.fallback_reason
+        self._backend_choice = pipeline.backend_choice
         self._classifier_location = pipeline.classifier_location
 
     def _process(self, stages: OverlappedPipeline, frame: ReceivedFrame) -> None:

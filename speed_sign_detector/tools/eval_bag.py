@@ -69,6 +69,10 @@ Example::
       time per frame, milliseconds: where the time goes on this host. The stages of
       STAGE_TIMINGS follow one another, so their means add up to at most the mean
       ``total``.
+  ``backend``, ``renderer``, ``backend_choice``
+      the detector backend that ran the drive (``gl``, ``cpu`` or ``numpy``; with
+      ``auto`` on a software GL renderer, the faster of gl and cpu on the first frames),
+      its renderer, and how it was chosen (with both times).
 
 A truncated or damaged bag ends the run with a non-zero exit status after the frames
 before the damage were processed, reported (the JSON line is still printed) and
@@ -549,6 +553,9 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
                     sheet_written = sheet.write(header, notes, outcomes)
                 except SpeedSignError as err:   # the metrics are still reported
                     stopped_by = stopped_by or err
+            # backend auto may have chosen another backend after timing the first frames
+            backend, renderer = pipeline.backend_name, pipeline.renderer
+            backend_choice = pipeline.backend_choice
         finally:
             if owns_pipeline:
                 pipeline.close()
@@ -562,7 +569,7 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
         'frames': frames, 'frames_planned': frames_total, 'partial': interrupted,
         'start_stamp_s': start_stamp_s,
         'duration_s': round(_span_s(stamps_s), 6),
-        'backend': backend, 'renderer': renderer,
+        'backend': backend, 'renderer': renderer, 'backend_choice': backend_choice,
         'fps': frames / loop_s if loop_s > 0 else 0.0,
         'latency_ms_p50': float(np.percentile(latencies_ms, 50)) if latencies_ms else None,
         'latency_ms_p95': float(np.percentile(latencies_ms, 95)) if latencies_ms else None,
@@ -659,7 +666,8 @@ def format_report(summary: dict[str, Any]) -> str:
     lines.append(f'{summary["frames"]} frames of {summary["topic"]} ({summary["msgtype"]}), '
                  f'{summary["duration_s"]:.1f} s of drive; {summary["fps"]:.1f} fps, latency '
                  + (f'p50 {p50:.1f} ms, p95 {p95:.1f} ms' if p50 is not None else 'n/a')
-                 + f'; backend {summary["backend"]} ({summary["renderer"]})')
+                 + f'; backend {summary["backend"]} ({summary["renderer"]}; '
+                 f'{summary["backend_choice"]})')
     limits = ', '.join(f'{event["limit_kmh"] or "end"} at {event["time_s"]:.2f} s'
                        for event in summary['limit_events']) or 'none'
     lines.append(f'limits recognized: {limits} (s since the first frame)')
@@ -680,8 +688,8 @@ def add_pipeline_options(parser: argparse.ArgumentParser) -> None:
     """The options of ``eval bag`` and ``eval fleet`` that set the pipeline and the grading:
     ``--config``, ``--backend``, ``--grace``."""
     parser.add_argument('--config', type=Path, help='parameter YAML file of the node')
-    parser.add_argument('--backend', choices=('auto', 'gl', 'numpy'),
-                        help='voting backend (overrides --config)')
+    parser.add_argument('--backend', choices=('auto', 'gl', 'cpu', 'numpy'),
+                        help='detector backend (overrides --config)')
     parser.add_argument('--grace', type=non_negative_number, default=DEFAULT_GRACE_S,
                         help=f'seconds after a sign leaves the image within which '
                         f'recognizing it still counts (default {DEFAULT_GRACE_S:g})')

@@ -94,9 +94,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help='folder with images/ and gt.txt')
     parser.add_argument('--json', action='store_true', help='print one JSON object as the '
                         'last line on stdout (instead of the table)')
-    parser.add_argument('--backend', choices=('auto', 'gl', 'numpy'), default='auto',
-                        help='radial-symmetry voting: gl (OpenGL, EGL), numpy (the '
-                        'reference), auto (gl when a context can be made; default)')
+    parser.add_argument('--backend', choices=('auto', 'gl', 'cpu', 'numpy'), default='auto',
+                        help='radial-symmetry voting: gl (OpenGL, EGL), cpu (vectorised '
+                        'CPU path), numpy (the reference), auto (gl on a GPU; on a '
+                        'software renderer the faster of gl and cpu on the first frames; '
+                        'cpu without GL; default)')
     parser.add_argument('--config', type=Path, default=None,
                         help='ROS 2 parameter YAML file of the node')
     parser.add_argument('--no-classify', action='store_true',

@@ -131,7 +131,7 @@ def build_parser() -> argparse.ArgumentParser:
                         default=_DEFAULTS.real_filter_noise,
                         help='the real filters\' white-noise weight (OT-MACH trade-off), '
                              'relative to the examples\' mean power')
-    common.add_argument('--backend', choices=('auto', 'gl', 'numpy'), default='auto',
+    common.add_argument('--backend', choices=('auto', 'gl', 'cpu', 'numpy'), default='auto',
                         help='detector backend that finds the candidates in the scenes')
     common.add_argument('--no-second-opinion', action='store_true',
                         help='train the composite filters only')
