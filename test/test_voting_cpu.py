@@ -17,6 +17,15 @@ from speed_sign_detector.detection.backend_trial import (
     WARMUP_FRAMES,
     BackendTrial,
 )
+from speed_sign_detector.detection.candidates import (
+    block_maxima,
+    score_normaliser,
+    select_candidates,
+)
+from speed_sign_detector.detection.candidates_cpu import (
+    packed_block_maxima,
+    select_packed_candidates,
+)
 from speed_sign_detector.detection.detector import CPU_RENDERER, Detector
 from speed_sign_detector.detection.gradients_cpu import compute_edges_fast
 from speed_sign_detector.detection.voting_cpu import (
@@ -29,6 +38,7 @@ from speed_sign_detector.detection.voting_numpy import (
     compute_edges,
     plan_bands,
     vote_images,
+    vote_signs,
 )
 from speed_sign_detector.errors import ConfigError
 
@@ -188,3 +198,40 @@ def test_backend_values_are_checked() -> None:
     with pytest.raises(ConfigError, match='unknown detector backend'):
         Detector(DetectorConfig(), backend='vulkan')
     assert dataclasses.replace(PipelineConfig(), backend='cpu').backend == 'cpu'
+
+
+@pytest.mark.parametrize('name', ['default', 'two_bands', 'deep_pyramid'])
+def test_packed_block_maxima_equal_the_reference_reduction(name: str) -> None:
+    """From the packed sums, the block maxima are those :func:`block_maxima` finds in the
+    unpacked vote images, bit for bit (a frame size no block size divides included)."""
+    config = CPU_CONFIGS[name]
+    voter = CPUVoter(config)
+    bands = plan_bands(config)
+    normalisers = [score_normaliser(len(vote_signs(config, band))) for band in bands]
+    for gray in (synthetic_scene(), synthetic_scene()[:237, :301]):
+        edges = compute_edges_fast(gray, config)
+        packed = voter.packed_votes(edges, (gray.shape[1], gray.shape[0]))
+        votes = [stencils.unpack(sums) for stencils, sums in zip(voter.stencils, packed)]
+        expected = block_maxima(votes, bands, gray.shape, config.block_size_px, normalisers)
+        found = packed_block_maxima(packed, voter.stencils, gray.shape,
+                                    config.block_size_px, normalisers)
+        assert np.count_nonzero(expected.score > 0.0) > 10
+        for field in ('score', 'x_px', 'y_px', 'radius_px', 'band'):
+            np.testing.assert_array_equal(getattr(found, field), getattr(expected, field),
+                                          err_msg=field)
+
+
+@pytest.mark.parametrize('max_candidates', [1, 7, 40])
+def test_packed_selection_equals_the_reference_selection(max_candidates: int) -> None:
+    """Locating only the blocks the top-N selection visits (more when suppression leaves
+    too few) selects what the full block maxima give."""
+    config = DetectorConfig(max_candidates=max_candidates)
+    voter = CPUVoter(config)
+    normalisers = [score_normaliser(len(vote_signs(config, band))) for band in voter.bands]
+    gray = synthetic_scene()
+    packed = voter.packed_votes(compute_edges_fast(gray, config), (320, 240))
+    full = packed_block_maxima(packed, voter.stencils, gray.shape, 8, normalisers)
+    for suppression in (1.0, 6.0):   # 6 voting radii: most blocks are suppressed
+        expected = select_candidates(full, max_candidates, 0.0, suppression)
+        assert select_packed_candidates(packed, voter.stencils, gray.shape, 8, normalisers,
+                                        max_candidates, 0.0, suppression) == expected

@@ -35,6 +35,10 @@ from speed_sign_detector.detection.candidates import (
     score_normaliser,
     select_candidates,
 )
+from speed_sign_detector.detection.candidates_cpu import (
+    packed_block_maxima,
+    select_packed_candidates,
+)
 from speed_sign_detector.detection.gradients import validate_frame
 from speed_sign_detector.detection.gradients_cpu import compute_edges_fast
 from speed_sign_detector.detection.voting_cpu import CPUVoter
@@ -308,21 +312,29 @@ class Detector:
             if backend_name == 'cpu':
                 edges = compute_edges_fast(working.image, self.config)
                 edged = time.perf_counter()
-                votes = self._cpu.vote_images(edges, frame_size)
+                packed = self._cpu.packed_votes(edges, frame_size)
+                voted = time.perf_counter()
+                candidates = select_packed_candidates(
+                    packed, self._cpu.stencils, working.image.shape,
+                    self.config.block_size_px, self.score_normalisers,
+                    self.config.max_candidates, self.config.min_score,
+                    self.config.suppression_factor)
             else:
                 edges = compute_edges(working.image, self.config)
                 edged = time.perf_counter()
                 tent = self.config.vote_profile == 'tent'
                 votes = [vote_band(edges[band.level], band, vote_signs(self.config, band),
                                    frame_size, tent) for band in self.bands]
-            voted = time.perf_counter()
+                voted = time.perf_counter()
+                maxima = block_maxima(votes, self.bands, working.image.shape,
+                                      self.config.block_size_px, self.score_normalisers)
             stage_ms['gradients'] = (edged - started) * 1e3
             stage_ms['voting'] = (voted - edged) * 1e3
-            maxima = block_maxima(votes, self.bands, working.image.shape,
-                                  self.config.block_size_px, self.score_normalisers)
             stage_ms['candidates'] = 0.0
-        candidates = select_candidates(maxima, self.config.max_candidates,
-                                       self.config.min_score, self.config.suppression_factor)
+        if backend_name != 'cpu':
+            candidates = select_candidates(maxima, self.config.max_candidates,
+                                           self.config.min_score,
+                                           self.config.suppression_factor)
         ratio = self.config.voting_edge_radius_ratio
         found = tuple(working.to_full_resolution(
             dataclasses.replace(candidate, radius_px=candidate.radius_px / ratio))
@@ -361,7 +373,12 @@ class Detector:
         frame = self._check(gray)
         if self._gl is not None:
             return self._gl.block_maxima(frame)
-        return block_maxima(self._cpu_vote_images(frame), self.bands, frame.shape,
+        if self._cpu is not None:
+            packed = self._cpu.packed_votes(compute_edges_fast(frame, self.config),
+                                            (frame.shape[1], frame.shape[0]))
+            return packed_block_maxima(packed, self._cpu.stencils, frame.shape,
+                                       self.config.block_size_px, self.score_normalisers)
+        return block_maxima(vote_images(frame, self.config), self.bands, frame.shape,
                             self.config.block_size_px, self.score_normalisers)
 
     def vote_images(self, gray: np.ndarray) -> list[np.ndarray]:

@@ -29,6 +29,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from speed_sign_detector.config import DetectorConfig
@@ -178,19 +179,30 @@ class CPUVoter:
 
     def vote_images(self, edges: list[EdgeList], frame_size: tuple[int, int]
                     ) -> list[np.ndarray]:
-        """One (H_target, W_target, CHANNELS) float32 vote image per band.
+        """One (H_target, W_target, CHANNELS) float32 vote image per band, equal to
+        :func:`voting_numpy.vote_band`'s up to the direction quantisation.
 
         ``edges[level]`` are the edge pixels of pyramid level ``level`` (as
         :func:`voting_numpy.compute_edges` gives them); ``frame_size`` is the
         ``(width, height)`` of level 0.
         """
-        return [self.vote_band(edges[band.level], band.index, frame_size)
+        return [stencils.unpack(sums) for stencils, sums
+                in zip(self.stencils, self.packed_votes(edges, frame_size))]
+
+    def packed_votes(self, edges: list[EdgeList], frame_size: tuple[int, int]
+                     ) -> list[np.ndarray]:
+        """One (H_target, W_target) float64 image of packed vote sums per band (see
+        :meth:`VoteStencils.unpack`); arguments as :meth:`vote_images`."""
+        levels = {band.level for band in self.bands}
+        bins = {level: direction_bins(level_edges) for level, level_edges in enumerate(edges)
+                if level in levels}
+        return [self.packed_band(edges[band.level], band.index, frame_size, bins[band.level])
                 for band in self.bands]
 
-    def vote_band(self, edges: EdgeList, band_index: int, frame_size: tuple[int, int]
-                  ) -> np.ndarray:
-        """Vote image of band ``band_index``: (H_target, W_target, CHANNELS) float32,
-        equal to :func:`voting_numpy.vote_band` up to the direction quantisation."""
+    def packed_band(self, edges: EdgeList, band_index: int, frame_size: tuple[int, int],
+                    bins: np.ndarray) -> np.ndarray:
+        """Packed vote sums of band ``band_index``: (H_target, W_target) float64 (a view
+        into a padded image); ``bins`` are the edges' :func:`direction_bins`."""
         stencils = self.stencils[band_index]
         band = stencils.band
         width, height = level_size(frame_size[0], frame_size[1], band.target_level)
@@ -199,14 +211,13 @@ class CPUVoter:
         sums = np.zeros(padded_width * padded_height)
         if edges.count:
             offsets = self._offsets(band_index, padded_width)
-            base, keys = self._edge_keys(edges, stencils, padded_width, margin)
+            base, keys = self._edge_keys(edges, bins, stencils, padded_width, margin)
             for sign in vote_signs(self.config, band):
                 turned = keys if sign > 0 else keys ^ (DIRECTION_BINS // 2)
                 _accumulate(sums, base, turned, offsets, stencils.packed_votes,
                             stencils.reach * (padded_width + 1))
-        sums = sums.reshape(padded_height, padded_width)[margin:margin + height,
-                                                          margin:margin + width]
-        return stencils.unpack(sums)
+        return sums.reshape(padded_height, padded_width)[margin:margin + height,
+                                                         margin:margin + width]
 
     def _offsets(self, band_index: int, padded_width: int) -> np.ndarray:
         """(K, S) int64 flat offsets of a band's stencils in a padded vote image."""
@@ -217,8 +228,8 @@ class CPUVoter:
         return self._flat_offsets[key]
 
     @staticmethod
-    def _edge_keys(edges: EdgeList, stencils: VoteStencils, padded_width: int,
-                   margin: int) -> tuple[np.ndarray, np.ndarray]:
+    def _edge_keys(edges: EdgeList, bins: np.ndarray, stencils: VoteStencils,
+                   padded_width: int, margin: int) -> tuple[np.ndarray, np.ndarray]:
         """Each edge's flat base pixel in the padded vote image and its stencil row
         (for the vote toward its gradient; the opposite direction is ``key ^ BINS/2``)."""
         phases = stencils.phases
@@ -227,11 +238,19 @@ class CPUVoter:
         phase_x, phase_y = x % phases, y % phases
         column = x // phases + stencils.phase_floor[phase_x] + margin
         row = y // phases + stencils.phase_floor[phase_y] + margin
-        angle = np.arctan2(edges.gy, edges.gx)
-        direction_bin = np.rint(angle * (DIRECTION_BINS / (2.0 * math.pi))).astype(np.int64)
-        direction_bin &= DIRECTION_BINS - 1
-        keys = (phase_y * phases + phase_x) * DIRECTION_BINS + direction_bin
+        keys = (phase_y * phases + phase_x) * DIRECTION_BINS + bins
         return row * padded_width + column, keys
+
+
+def direction_bins(edges: EdgeList) -> np.ndarray:
+    """(E,) int64: each edge's gradient direction as the nearest of the
+    :data:`DIRECTION_BINS` stencil angles (``cv2.phase``: within 2e-4 rad of ``atan2``,
+    a 15th of a bin, at a 40th of its time)."""
+    if not edges.count:
+        return np.zeros(0, np.int64)
+    angle = cv2.phase(edges.gx, edges.gy).ravel()   # [0, 2 pi)
+    direction_bin = np.rint(angle * np.float32(DIRECTION_BINS / (2.0 * math.pi)))
+    return direction_bin.astype(np.int64) & (DIRECTION_BINS - 1)
 
 
 def _accumulate(sums: np.ndarray, base: np.ndarray, keys: np.ndarray,
