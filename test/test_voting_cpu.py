@@ -235,3 +235,19 @@ def test_packed_selection_equals_the_reference_selection(max_candidates: int) ->
         expected = select_candidates(full, max_candidates, 0.0, suppression)
         assert select_packed_candidates(packed, voter.stencils, gray.shape, 8, normalisers,
                                         max_candidates, 0.0, suppression) == expected
+
+
+def test_voting_on_two_threads_equals_one_thread() -> None:
+    """The bands split between two threads give the same packed sums (exact integers)."""
+    config = DetectorConfig()
+    gray = synthetic_scene()
+    edges = compute_edges_fast(gray, config)
+    alone, helped = CPUVoter(config, threads=1), CPUVoter(config, threads=2)
+    try:
+        for one, two in zip(alone.packed_votes(edges, (320, 240)),
+                            helped.packed_votes(edges, (320, 240)), strict=True):
+            np.testing.assert_array_equal(one, two)
+    finally:
+        helped.close()
+        helped.close()   # idempotent
+    assert helped.packed_votes(edges, (320, 240))[0].shape == (240, 320)   # on one thread

@@ -362,6 +362,7 @@ class Detector:
                 self._gl.close()
                 self._gl = None
             else:
+                self._cpu.close()
                 self._cpu = None
             self._use(decision.backend)
             LOGGER.info('detector backend chosen: %s', self.backend_choice)
@@ -423,9 +424,11 @@ class Detector:
         return combined
 
     def close(self) -> None:
-        """Release the GL context (idempotent)."""
+        """Release the GL context and the CPU path's voting thread (idempotent)."""
         if self._gl is not None:
             self._gl.close()
+        if self._cpu is not None:
+            self._cpu.close()
         self._closed = True
 
     @property

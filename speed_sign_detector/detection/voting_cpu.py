@@ -27,6 +27,8 @@ the other side) and the fixed-point units (:data:`FIXED_POINT_ONE` per 1.0);
 from __future__ import annotations
 
 import math
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import cv2
@@ -49,6 +51,9 @@ DIRECTION_BINS = 1024
 """Gradient directions a stencil is kept for (a power of two; 2 pi / 1024 = 0.35 deg)."""
 EDGES_PER_CHUNK = 4096
 """Edge pixels voted per ``np.bincount`` (their stencils' temporaries stay in the cache)."""
+VOTING_THREADS = min(2, os.cpu_count() or 1)
+"""Threads that vote (bands split between them; numpy's take and bincount release the
+GIL). Two: on a 2-core host the other core is shared with recognition anyway."""
 FIXED_POINT_ONE = 1 << 16
 """Integer units per 1.0 of a vote's weight and count (finer when the bound allows)."""
 _MANTISSA_BITS = 52  # float64 holds every integer below 2^53 exactly
@@ -167,15 +172,24 @@ class CPUVoter:
         config: detector settings (bands, polarity, vote profile).
 
     Building the stencils takes about 0.1-0.3 s per config; flat offsets are cached per
-    vote-image width.
+    vote-image width. With :data:`VOTING_THREADS` 2 the bands are split into two groups of
+    about equal work, one voted on a helper thread; :meth:`close` ends it.
     """
 
-    def __init__(self, config: DetectorConfig) -> None:
+    def __init__(self, config: DetectorConfig, threads: int = VOTING_THREADS) -> None:
         self.config = config
         self.bands = plan_bands(config)
         tent = config.vote_profile == 'tent'
         self.stencils = tuple(build_stencils(band, tent) for band in self.bands)
         self._flat_offsets: dict[tuple[int, int], np.ndarray] = {}
+        self._helper = (ThreadPoolExecutor(1, thread_name_prefix='cpu-voting')
+                        if threads > 1 and len(self.bands) > 1 else None)
+
+    def close(self) -> None:
+        """End the helper thread (idempotent); voting goes on in the calling thread."""
+        if self._helper is not None:
+            self._helper.shutdown()
+            self._helper = None
 
     def vote_images(self, edges: list[EdgeList], frame_size: tuple[int, int]
                     ) -> list[np.ndarray]:
@@ -196,8 +210,32 @@ class CPUVoter:
         levels = {band.level for band in self.bands}
         bins = {level: direction_bins(level_edges) for level, level_edges in enumerate(edges)
                 if level in levels}
-        return [self.packed_band(edges[band.level], band.index, frame_size, bins[band.level])
-                for band in self.bands]
+
+        def vote(indices: list[int]) -> list[np.ndarray]:
+            return [self.packed_band(edges[self.bands[index].level], index, frame_size,
+                                     bins[self.bands[index].level]) for index in indices]
+
+        if self._helper is None:
+            return vote(list(range(len(self.bands))))
+        mine, helpers = self._split_bands(edges)
+        helped = self._helper.submit(vote, helpers)
+        packed = dict(zip(mine, vote(mine)))
+        packed.update(zip(helpers, helped.result()))
+        return [packed[index] for index in range(len(self.bands))]
+
+    def _split_bands(self, edges: list[EdgeList]) -> tuple[list[int], list[int]]:
+        """Band indices in two groups of about equal voting work (edges x stencil entries
+        x vote directions), the larger first."""
+        work = [edges[band.level].count * stencils.packed_votes.shape[1]
+                * len(vote_signs(self.config, band))
+                for band, stencils in zip(self.bands, self.stencils)]
+        groups: tuple[list[int], list[int]] = ([], [])
+        loads = [0, 0]
+        for index in sorted(range(len(work)), key=lambda item: -work[item]):
+            lighter = 0 if loads[0] <= loads[1] else 1
+            groups[lighter].append(index)
+            loads[lighter] += work[index]
+        return groups
 
     def packed_band(self, edges: EdgeList, band_index: int, frame_size: tuple[int, int],
                     bins: np.ndarray) -> np.ndarray:
