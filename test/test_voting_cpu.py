@@ -185,6 +185,7 @@ def test_auto_on_llvmpipe_times_both_and_says_which_it_kept(
         assert decision is not None and decision.backend == detector.backend_name
         assert detector.backend_name in ('gl', 'cpu')
         assert detector.backend_choice == decision.describe()
+        assert detector.renderer == decision.renderer   # the host's renderer stays named
         assert set(decision.median_ms) == {'gl', 'cpu'}
         assert all(value > 0.0 for value in decision.median_ms.values())
         assert_same_candidates(detector.detect(gray), expected)   # on the kept path

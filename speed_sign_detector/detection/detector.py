@@ -179,7 +179,9 @@ class Detector:
     Attributes:
         backend_name: ``'gl'``, ``'cpu'`` or ``'numpy'``: the backend in use (while an
             ``'auto'`` trial runs, ``'gl'``, whose candidates are returned).
-        renderer: the GL_RENDERER string, :data:`CPU_RENDERER` or
+        renderer: the GL_RENDERER string (also when ``'auto'`` kept the CPU path after
+            timing it against a software renderer: the host's renderer stays named),
+            :data:`CPU_RENDERER` (``'cpu'``, or no GL context) or
             :data:`REFERENCE_RENDERER`.
         vote_method: how votes are added: ``'raster'`` or ``'scatter'`` (GL),
             ``'stencil'`` (CPU), ``'numpy'``.
@@ -253,7 +255,9 @@ class Detector:
         if backend_name == 'gl':
             self.renderer, self.vote_method = self._gl.renderer, self._gl.vote_method
         elif backend_name == 'cpu':
-            self.renderer, self.vote_method = CPU_RENDERER, 'stencil'
+            self.vote_method = 'stencil'
+            if self.trial_decision is None:   # else the software renderer it was timed on
+                self.renderer = CPU_RENDERER
         else:
             self.renderer, self.vote_method = REFERENCE_RENDERER, 'numpy'
 
