@@ -48,10 +48,29 @@ bank: $(INSTALLED)
 	OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 $(BIN)/speed_sign_train build speed_sign_detector/recognition/data/default_bank.npz \
 		$(DATA)/gtsrb-dev $(DATA)/gtsrb-lookalikes-dev --scenes $(DATA)/gtsdb-dev
 
+## validate: the recognition figures too slow for make bench (about 1.5 h on 2 cores), as
+## JSON in out/validation/ with their command and host: 5 folds by track (and by scene),
+## leave one value out, the rendered sign designs; make bench adds them to bench/RESULTS.md
+.PHONY: validate
+validate: $(INSTALLED)
+	mkdir -p $(OUT)/validation
+	$(BIN)/python bench/record_json.py $(OUT)/validation/folds.json -- $(BIN)/speed_sign_train \
+		validate $(DATA)/gtsrb-dev $(DATA)/gtsrb-lookalikes-dev --scenes $(DATA)/gtsdb-dev --json
+	$(BIN)/python bench/record_json.py $(OUT)/validation/value_holdout.json -- \
+		$(BIN)/speed_sign_train validate $(DATA)/gtsrb-dev $(DATA)/gtsrb-lookalikes-dev \
+		--leave-one-value-out --json
+	$(BIN)/python bench/record_json.py $(OUT)/validation/designs.json -- \
+		$(BIN)/python bench/bench_sign_designs.py --per-value 6 --seed 1 --json
+
 ## bench: accuracy and speed against the peers: results.json, table and plots in out/bench/,
-## and bench/RESULTS.md generated from them
+## and bench/RESULTS.md generated from them (with the JSON of make validate and make soak
+## where out/ holds it)
+long_run = $(if $(wildcard $(OUT)/$(2)),--$(1) $(OUT)/$(2))
 bench: $(INSTALLED)
-	$(BIN)/python bench/run_all.py --out $(OUT)/bench --results-md bench/RESULTS.md
+	$(BIN)/python bench/run_all.py --out $(OUT)/bench --results-md bench/RESULTS.md \
+		$(call long_run,validation,validation/folds.json) \
+		$(call long_run,value-holdout,validation/value_holdout.json) \
+		$(call long_run,designs,validation/designs.json) $(call long_run,soak,soak/soak.json)
 
 ## soak: the node fed at 30 Hz by a looping 1280x720 drive for SOAK_MINUTES (an hour): its
 ## memory every 10 s, every frame answered or counted as dropped, errors, the stamps jumping

@@ -5,9 +5,12 @@
 and the plots of a saved run::
 
     python bench/report.py out/bench/results.json [--out DIR] [--results-md bench/RESULTS.md]
+        [--validation PATH] [--value-holdout PATH] [--designs PATH] [--soak PATH]
 
 (``--results-md`` renders bench/RESULTS.md again from the saved run, see
-``results_markdown.py``.)
+``results_markdown.py``. The last four add the JSON files of the long runs, ``make
+validate`` and ``make soak``, to the saved results.json, which is written again with them,
+and so to the report: ``long_runs_markdown.py``.)
 
 Plots (PNG, matplotlib with the Agg backend):
     ``detector_time_vs_frame_size.png``: median ms per frame vs megapixels, per method;
@@ -342,8 +345,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--out', type=Path, help='folder for the plots (default: beside it)')
     parser.add_argument('--results-md', type=Path, metavar='PATH',
                         help='also render the Markdown report (bench/RESULTS.md) there')
+    from long_runs_markdown import add_arguments, load_long_runs  # a sibling script
+
+    add_arguments(parser)
     args = parser.parse_args(argv)
     results = json.loads(args.results.read_text())
+    long_runs = load_long_runs(args)
+    if long_runs:
+        results.update(long_runs)
+        write_json(results, args.results)
+        print(f"merged {', '.join(long_runs)} into {args.results}", file=sys.stderr)
     print(format_table(results))
     if args.results_md is not None:
         from results_markdown import write_results_markdown  # a sibling script of bench/

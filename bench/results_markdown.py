@@ -4,14 +4,20 @@
 results.json --results-md PATH`` renders it again from a saved run. The file is generated,
 never edited by hand: a summary first (the host, then today's accuracy and speed of each
 stage against the peers), then one table per benchmark. It holds the figures of that one
-run only; older runs live in git's history.
+run only; older runs live in git's history. The long runs ``make bench`` is given as JSON
+files (``make validate``, ``make soak``: recognition per value, leave one value out,
+rendered designs, soak) follow, each with its own command and host
+(``long_runs_markdown.py``).
 """
 from __future__ import annotations
 
-import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
+
+from long_runs_markdown import long_run_lines, summary_rows
+from markdown_tables import number as _number
+from markdown_tables import table as _table
 
 #: Labels of the detector methods (the keys of results['detector']['sizes'][...]['methods']).
 METHOD_LABELS: dict[str, str] = {
@@ -29,23 +35,8 @@ SMOKE_NOTE = ('> **Smoke run** (`--quick`): a handful of frames and crops, run t
               'machinery. These figures are not measurements; run `make bench` for them.')
 
 
-def _number(value: float | None, digits: int = 1) -> str:
-    """``value`` with ``digits`` decimals, or '-' for None and NaN."""
-    if value is None or (isinstance(value, float) and math.isnan(value)):
-        return '-'
-    return f'{value:.{digits}f}'
-
-
 def _label(method: str) -> str:
     return METHOD_LABELS.get(method, method)
-
-
-def _table(header: Sequence[str], rows: Sequence[Sequence[str]],
-           right_aligned_from: int = 1) -> list[str]:
-    """A Markdown table; columns from ``right_aligned_from`` on are right-aligned."""
-    rule = ['---' if index < right_aligned_from else '---:' for index in range(len(header))]
-    return ['| ' + ' | '.join(header) + ' |', '|' + '|'.join(rule) + '|'] + [
-        '| ' + ' | '.join(row) + ' |' for row in rows]
 
 
 def _problem(section: Any) -> str | None:
@@ -140,6 +131,7 @@ def summary_lines(results: Mapping[str, Any]) -> list[str]:
                          f"{rate['publish_hz']:g} Hz: frames answered per second",
                          f"{_number(rate['output_fps'])} fps, "
                          f"{rate['dropped']} of {rate['published']} unanswered", '-'])
+    rows += summary_rows(results)
     lines += _table(['benchmark', 'ours', 'peers'], rows, right_aligned_from=3)
     if isinstance(classifier, Mapping) and classifier.get('crops_seen_in_training'):
         lines += ['', 'The shipped bank learned from gtsrb-dev, so its accuracy on those '
@@ -309,6 +301,7 @@ def render_results_markdown(results: Mapping[str, Any]) -> str:
         problem = _problem(results.get(key))
         lines += [f'## {title}', '', f'{problem[0].upper()}{problem[1:]}.'] if problem \
             else render(results[key])
+    lines += long_run_lines(results)
     papers = results.get('paper_figures_quoted_not_measured')
     if papers:
         lines += [''] + paper_lines(papers)

@@ -45,15 +45,19 @@ plots (see ``report.py``); with ``--results-md PATH`` also the Markdown report
 handful of frames/crops (smoke test, not figures to quote). Usage::
 
     python bench/run_all.py --out out/bench [--results-md bench/RESULTS.md] [--quick]
-        [--skip-node] [--params FILE|defaults]
+        [--skip-node] [--params FILE|defaults] [--validation PATH] [--value-holdout PATH]
+        [--designs PATH] [--soak PATH]
+
+The last four name the JSON files of the runs too long for ``make bench`` (``make
+validate``: 5 folds by track, leave one value out, rendered designs; ``make soak``): their
+figures join results.json and get their sections in the Markdown report
+(``long_runs_markdown.py``); ``make bench`` passes the ones under out/ that exist.
 """
 from __future__ import annotations
 
 import argparse
 import contextlib
 import dataclasses
-import os
-import platform
 import sys
 import time
 from collections.abc import Callable
@@ -64,15 +68,15 @@ from speed_sign_detector.blas_threads import use_one_blas_thread
 
 use_one_blas_thread()  # as the node does, before numpy loads its BLAS: the node's figures
 
-import cv2  # noqa: E402
-
 BENCH_DIR = Path(__file__).resolve().parent
 if str(BENCH_DIR) not in sys.path:  # the sibling bench scripts are plain modules
     sys.path.insert(0, str(BENCH_DIR))
 
 import bench_inputs  # noqa: E402
+import long_runs_markdown  # noqa: E402
 import report  # noqa: E402
 import results_markdown  # noqa: E402
+from host_record import machine_record  # noqa: E402
 from run_all_stages import (  # noqa: E402
     DATA_DIR,
     BenchSettings,
@@ -115,39 +119,28 @@ QUICK: dict[str, object] = {
 
 
 # ----------------------------------------------------------------------------- driver
-def cpu_model() -> str:
-    """The CPU's model name (/proc/cpuinfo on Linux), else what ``platform`` says."""
-    with contextlib.suppress(OSError):
-        for line in Path('/proc/cpuinfo').read_text().splitlines():
-            if line.lower().startswith(('model name', 'hardware')) and ':' in line:
-                return line.split(':', 1)[1].strip()
-    return platform.processor() or platform.machine()
-
-
-def _machine() -> dict[str, object]:
-    load = os.getloadavg() if hasattr(os, 'getloadavg') else None
-    return {'cpus': os.cpu_count(), 'cpu_model': cpu_model(), 'platform': platform.platform(),
-            'processor': platform.processor() or platform.machine(),
-            'python': platform.python_version(), 'opencv': cv2.__version__,
-            'load_average_at_start': list(load) if load else None}
+#: The host record (bench_soak.py takes it from here).
+_machine = machine_record
 
 
 Stage = Callable[[BenchSettings], dict[str, object]]
 
 
-def run_benchmark(settings: BenchSettings) -> dict[str, object]:
+def run_benchmark(settings: BenchSettings,
+                  long_runs: dict[str, dict[str, object]] | None = None) -> dict[str, object]:
     """Run every stage, write results.json, table.txt, the plots and (when
     ``settings.results_md`` is set) the Markdown report; returns the results.
 
     A stage that fails is recorded as ``{'error': message}`` (and reported) while the
-    others still run.
+    others still run. ``long_runs``: the figures of the long runs given as JSON files
+    (``long_runs_markdown.load_long_runs``), added to the results under their keys.
     """
     settings.out_dir.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
     results: dict[str, object] = {
         'date_utc': datetime.now(UTC).isoformat(timespec='seconds'),
         'command': list(settings.command), 'quick': settings.quick,
-        'machine': _machine(),
+        'machine': machine_record(),
         'settings': {k: (str(v) if isinstance(v, Path) else v)
                      for k, v in dataclasses.asdict(settings).items()},
         'paper_figures_quoted_not_measured': PAPER_FIGURES,
@@ -171,6 +164,7 @@ def run_benchmark(settings: BenchSettings) -> dict[str, object]:
         with contextlib.suppress(SpeedSignError, OSError):
             results['pipeline']['config'] = to_parameters(pipeline_config(settings))
     results['elapsed_s'] = time.perf_counter() - started
+    results.update(long_runs or {})
     table = report.format_table(results)
     results['plots'] = [str(path) for path in report.write_plots(results, settings.out_dir)]
     report.write_json(results, settings.out_dir / 'results.json')
@@ -198,6 +192,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--pipeline-frames', type=int)
     parser.add_argument('--node-seconds', type=float, help='0 = do not run the node')
     parser.add_argument('--skip-node', action='store_true', help='same as --node-seconds 0')
+    long_runs_markdown.add_arguments(parser)
     parser.add_argument('--params', default=str(bench_inputs.PARAMS_FILE),
                         help="parameter file of the pipeline and classifier stages (the "
                              "node's, which the node stage uses); 'defaults' = PipelineConfig()")
@@ -221,7 +216,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f'data folder {folder} not found (see ../shared/data/README)',
                   file=sys.stderr)
             return 2
-    results = run_benchmark(settings)
+    results = run_benchmark(settings, long_runs_markdown.load_long_runs(args))
     failed = [name for name, value in results.items()
               if isinstance(value, dict) and 'error' in value]
     print(f'\nwrote {settings.out_dir}/results.json, table.txt and {len(results["plots"])} '
