@@ -181,6 +181,10 @@ class CPUVoter:
         self.bands = plan_bands(config)
         tent = config.vote_profile == 'tent'
         self.stencils = tuple(build_stencils(band, tent) for band in self.bands)
+        # per band, the stencils of all its vote directions side by side (one look-up and
+        # one bincount per chunk of edges whether it votes toward one side or both)
+        self._tables = tuple(_directions_table(stencils, vote_signs(config, band))
+                             for band, stencils in zip(self.bands, self.stencils))
         self._flat_offsets: dict[tuple[int, int], np.ndarray] = {}
         self._helper = (ThreadPoolExecutor(1, thread_name_prefix='cpu-voting')
                         if threads > 1 and len(self.bands) > 1 else None)
@@ -226,9 +230,8 @@ class CPUVoter:
     def _split_bands(self, edges: list[EdgeList]) -> tuple[list[int], list[int]]:
         """Band indices in two groups of about equal voting work (edges x stencil entries
         x vote directions), the larger first."""
-        work = [edges[band.level].count * stencils.packed_votes.shape[1]
-                * len(vote_signs(self.config, band))
-                for band, stencils in zip(self.bands, self.stencils)]
+        work = [edges[band.level].count * table[2].shape[1]
+                for band, table in zip(self.bands, self._tables)]
         groups: tuple[list[int], list[int]] = ([], [])
         loads = [0, 0]
         for index in sorted(range(len(work)), key=lambda item: -work[item]):
@@ -250,10 +253,8 @@ class CPUVoter:
         if edges.count:
             offsets = self._offsets(band_index, padded_width)
             base, keys = self._edge_keys(edges, bins, stencils, padded_width, margin)
-            for sign in vote_signs(self.config, band):
-                turned = keys if sign > 0 else keys ^ (DIRECTION_BINS // 2)
-                _accumulate(sums, base, turned, offsets, stencils.packed_votes,
-                            stencils.reach * (padded_width + 1))
+            _accumulate(sums, base, keys, offsets, self._tables[band_index][2],
+                        stencils.reach * (padded_width + 1))
         return sums.reshape(padded_height, padded_width)[margin:margin + height,
                                                          margin:margin + width]
 
@@ -261,8 +262,8 @@ class CPUVoter:
         """(K, S) int64 flat offsets of a band's stencils in a padded vote image."""
         key = (band_index, padded_width)
         if key not in self._flat_offsets:
-            stencils = self.stencils[band_index]
-            self._flat_offsets[key] = stencils.offset_y * padded_width + stencils.offset_x
+            offset_x, offset_y, _ = self._tables[band_index]
+            self._flat_offsets[key] = offset_y * padded_width + offset_x
         return self._flat_offsets[key]
 
     @staticmethod
@@ -289,6 +290,17 @@ def direction_bins(edges: EdgeList) -> np.ndarray:
     angle = cv2.phase(edges.gx, edges.gy).ravel()   # [0, 2 pi)
     direction_bin = np.rint(angle * np.float32(DIRECTION_BINS / (2.0 * math.pi)))
     return direction_bin.astype(np.int64) & (DIRECTION_BINS - 1)
+
+
+def _directions_table(stencils: VoteStencils, signs: tuple[float, ...]
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(offset_x, offset_y, packed_votes)``, each (K, S x len(signs)): row ``key`` holds
+    the stencil of an edge of that key voting along its gradient (sign +1) and/or against
+    it (-1: the stencil of the opposite direction, ``key ^ DIRECTION_BINS / 2``)."""
+    rows = np.arange(stencils.packed_votes.shape[0])
+    chosen = [rows if sign > 0 else rows ^ (DIRECTION_BINS // 2) for sign in signs]
+    return tuple(np.concatenate([array[choice] for choice in chosen], axis=1)
+                 for array in (stencils.offset_x, stencils.offset_y, stencils.packed_votes))
 
 
 def _accumulate(sums: np.ndarray, base: np.ndarray, keys: np.ndarray,
