@@ -19,10 +19,17 @@ a table look-up per edge, one addition of its position and one ``np.bincount`` p
 of edges. Chunks of :data:`EDGES_PER_CHUNK` row-ordered edges keep the temporaries and the
 rows they touch in the CPU caches (4x faster than one pass over a whole frame).
 
-The vote images equal the reference's up to the direction quantisation (a vote pixel
-whose centre lies within a few hundredths of a pixel of a trapezoid's edge may fall on
-the other side) and the fixed-point units (:data:`FIXED_POINT_ONE` per 1.0);
+The vote images equal the reference's up to the direction quantisation and the
+fixed-point units (:data:`FIXED_POINT_ONE` per 1.0). The quantisation moves a vote
+pixel whose centre lies within a few hundredths of a pixel of a trapezoid's edge to the
+other side, and changes a vote's tent weight by up to 0.007 (the weight changes by about
+``1 / tan(pi/8)`` per radian of direction): on real scenes the images correlate with the
+reference's above 0.9997 and their totals agree to 0.2 %, with the same candidates;
 ``test_voting_cpu.py`` checks them against the reference.
+
+A band that votes toward both sides of its edges keeps both directions' stencils side
+by side in one table row, so that each chunk costs one look-up and one ``np.bincount``.
+The bands are split over two threads (:data:`VOTING_THREADS`).
 """
 from __future__ import annotations
 
