@@ -83,15 +83,19 @@ class _BandBlocks:
         band_best = np.full((len(packed), rows, cols), -np.inf, np.float32)
         for index, (sums, band_stencils, normaliser) in enumerate(
                 zip(packed, stencils, normalisers, strict=True)):
-            weight = np.floor(sums * (1.0 / band_stencils.count_scale))
-            # as the reference: float32 weight sum, times the float32 normaliser
-            score = (weight * (1.0 / band_stencils.weight_one)).astype(np.float32)
-            score *= np.float32(normaliser)
+            weight = np.multiply(sums, 1.0 / band_stencils.count_scale)
+            np.floor(weight, out=weight)
+            weight *= 1.0 / band_stencils.weight_one   # a power of two: exact
             step = max(1, block_px // band_stencils.band.target_scale)
-            padded = np.full((rows * step, cols * step), -np.inf, np.float32)
-            used_rows = min(score.shape[0], rows * step)
-            used_cols = min(score.shape[1], cols * step)
-            padded[:used_rows, :used_cols] = score[:used_rows, :used_cols]
+            # the score image is the top left of the padded one (a band's image is never
+            # larger than its blocks: H_target = H >> level <= rows x step)
+            padded = np.empty((rows * step, cols * step), np.float32)
+            score = padded[:sums.shape[0], :sums.shape[1]]
+            # as the reference: float32 weight sum, times the float32 normaliser
+            np.copyto(score, weight, casting='same_kind')
+            score *= np.float32(normaliser)
+            padded[sums.shape[0]:] = -np.inf
+            padded[:sums.shape[0], sums.shape[1]:] = -np.inf
             # rows of each block first (contiguous rows), then the columns
             band_best[index] = padded.reshape(rows, step, cols * step).max(axis=1).reshape(
                 rows, cols, step).max(axis=2)
