@@ -34,8 +34,12 @@ from speed_sign_detector.recognition.crop_framing import (
 )
 from speed_sign_detector.recognition.filter_banks import bank_radii, build_banks
 from speed_sign_detector.recognition.second_opinion import (
+    COMPOSITE_ONLY_OVERRULE_LEAD,
     END_OF_LIMIT_LABEL,
+    RENDERED_ONLY_MAX_GAP,
+    RENDERED_ONLY_MAX_RANK,
     RENDERED_ONLY_MIN_SCORE,
+    UNSEEN_RUNNER_UP_PSR,
     SecondOpinion,
 )
 from speed_sign_detector.recognition.sign_features import FEATURE_SIZE
@@ -458,12 +462,22 @@ def test_second_opinion_chooses_only_among_ranked_real_labels() -> None:
     # a label learned from renderings only is never its choice over a real one
     rendered_best = np.asarray([0.1, -0.5, -0.5, 0.9, -1.0])
     assert opinion.choose(rendered_best, ['30', '130'], 2, 0.2) == '30'
-    # the correlation's rendered-only winner stands only where the model reads it too;
-    # otherwise the answer is withheld: a model that never saw that value's real pixels
-    # does not turn it into another limit (a 130 into the 120 it knows)
+    # the correlation's rendered-only winner stands where the model reads it too, or
+    # ranks it among its best RENDERED_ONLY_MAX_RANK + 1 labels (a model that never saw
+    # that value's real pixels names the nearest value it knows: it cannot vouch
+    # against it); otherwise the answer is withheld, never turned into another limit
     assert opinion.choose(rendered_best, ['130', '30'], 2, 0.2) == '130'
-    assert opinion.choose(scores, ['130', '30'], 2, 0.2) is None
-    assert opinion.choose(scores, ['130', '80', '30'], 2, 0.2) is None
+    assert RENDERED_ONLY_MAX_RANK == 3 and RENDERED_ONLY_MAX_GAP < 2.0
+    assert opinion.choose(scores, ['130', '30'], 2, 0.2) == '130'       # 4th, 1.8 below
+    assert opinion.choose(scores, ['130', '80', '30'], 2, 0.2) == '130'
+    far_below = np.asarray([1.0, 0.2, -0.5, -0.95, -1.0])               # 1.95 below
+    assert opinion.choose(far_below, ['130', '30'], 2, 0.2) is None
+    fifth = _opinion(('30', '70', '80', '100', '130', 'other_sign'),
+                     ('30', '70', '80', '100', 'other_sign'))
+    assert fifth.choose(np.asarray([0.9, 0.2, -0.3, -0.5, -0.6, -1.0]), ['130', '30'], 2,
+                        0.2) is None                                   # 5th of the model's
+    reads_no_sign = np.asarray([-0.9, -0.9, -0.9, -0.3, 0.9])           # best: other sign
+    assert opinion.choose(reads_no_sign, ['130', '30'], 2, 0.2) is None
     # a real winner may still be overruled by a real runner-up with a clear lead ...
     assert opinion.choose(scores, ['70', '30'], 2, 0.2, overrule_lead=0.5) == '30'
     # ... but a lead under overrule_lead withholds a limit the two disagree on
@@ -477,6 +491,43 @@ def test_second_opinion_chooses_only_among_ranked_real_labels() -> None:
     assert opinion.choose(rather_not, ['130', '30'], 2, 0.2) is None
     assert opinion.choose(rather_not + 0.2, ['130', '30'], 2, 0.2) == '130'
     assert opinion.choose(scores, [], 2, 0.2) is None
+
+
+def test_second_opinion_withholds_a_limit_close_to_one_it_cannot_vouch_against() -> None:
+    """A limit the model knows from renderings only, ranked by the correlation within
+    UNSEEN_RUNNER_UP_PSR of its leading limit, withholds the answer."""
+    opinion = _opinion(('30', '60', '80', 'other_sign'), ('30', '80', 'other_sign'))
+    reads_80 = np.asarray([-0.9, -0.9, 0.9, -1.0])
+    close = [('80', 12.0), ('60', 12.0 - UNSEEN_RUNNER_UP_PSR + 0.1), ('30', 9.0)]
+    far = [('80', 12.0), ('60', 12.0 - UNSEEN_RUNNER_UP_PSR - 0.1), ('30', 9.0)]
+    assert opinion.choose(reads_80, ['80', '60', '30'], 3, 0.2, 1.0, close) is None
+    assert opinion.choose(reads_80, ['80', '60', '30'], 3, 0.2, 1.0, far) == '80'
+    # a real runner-up that close is the model's to judge
+    real_close = [('80', 12.0), ('30', 11.9)]
+    assert opinion.choose(reads_80, ['80', '30'], 3, 0.2, 1.0, real_close) == '80'
+    # without the correlation's PSRs there is no such check
+    assert opinion.choose(reads_80, ['80', '60', '30'], 3, 0.2, 1.0) == '80'
+
+
+def test_overruling_a_value_known_from_composites_only_needs_a_clear_lead() -> None:
+    """The model turns the correlation's leading limit into another only with a lead of
+    COMPOSITE_ONLY_OVERRULE_LEAD where either is known from composites only."""
+    labels = ('20', '100', '120', 'other_sign')
+    opinion = dataclasses.replace(_opinion(labels, labels),
+                                  crop_labels=('20', '100', 'other_sign'))
+    reads_100 = np.asarray([-1.0, 0.7, -0.8, -1.0])              # lead 1.5 over 120
+    assert COMPOSITE_ONLY_OVERRULE_LEAD > 1.5
+    assert opinion.choose(reads_100, ['120', '100'], 2, 0.2, 1.0) is None
+    assert opinion.choose(np.asarray([-1.0, 1.0, -1.0, -1.0]), ['120', '100'], 2, 0.2,
+                          1.0) == '100'                          # lead 2.0
+    # between two values with real crops the usual overrule lead holds
+    assert opinion.choose(np.asarray([-0.8, 0.7, -1.0, -1.0]), ['20', '100'], 2, 0.2,
+                          1.0) == '100'
+    # agreeing with the correlation needs no more than min_lead
+    assert opinion.choose(np.asarray([-1.0, -0.8, 0.7, -1.0]), ['120', '100'], 2, 0.2,
+                          1.0) == '120'
+    # banks that do not record their crop labels treat every real label as one
+    assert _opinion(labels, labels).choose(reads_100, ['120', '100'], 2, 0.2, 1.0) == '100'
 
 
 def test_second_opinion_never_turns_a_limit_into_an_end_of_limit() -> None:

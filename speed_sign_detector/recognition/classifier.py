@@ -399,7 +399,9 @@ class Classifier:
                 max(self.trained_bank.min_lead, config.second_opinion_low_psr_lead)
             choice = opinion.choose(reading.opinion_scores, reading.ranking or labels,
                                     self.trained_bank.candidates, min_lead,
-                                    config.second_opinion_overrule_lead)
+                                    config.second_opinion_overrule_lead,
+                                    [(name, psr) for name, (_, psr) in
+                                     zip(labels, evidence.ranked)])
             withhold = choice is None
             label = choice if choice is not None else label
         psr = next(p for (_, p), name in zip(evidence.ranked, labels) if name == label)

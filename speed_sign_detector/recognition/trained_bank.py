@@ -79,6 +79,9 @@ def save_trained_bank(path: Path, bank: TrainedBank) -> None:
         opinion = bank.second_opinion
         arrays.update(opinion_labels=np.asarray(opinion.labels),
                       opinion_real_labels=np.asarray(opinion.real_labels),
+                      opinion_crop_labels=np.asarray(
+                          opinion.real_labels if opinion.crop_labels is None
+                          else opinion.crop_labels),
                       feature_mean=opinion.feature_mean,
                       feature_scale=opinion.feature_scale,
                       weights=opinion.weights.astype(np.float16), bias=opinion.bias)
@@ -116,7 +119,10 @@ def load_trained_bank(path: Path) -> TrainedBank:
                                     tuple(str(n) for n in arrays['opinion_real_labels']),
                                     *((arrays['hidden_weights'].astype(np.float32),
                                        arrays['hidden_bias'].astype(np.float32))
-                                      if 'hidden_weights' in arrays else ()))
+                                      if 'hidden_weights' in arrays else (None, None)),
+                                    crop_labels=tuple(
+                                        str(n) for n in arrays['opinion_crop_labels'])
+                                    if 'opinion_crop_labels' in arrays else None)
         examples = {name[len('examples_'):]: array.astype(np.float32)
                     for name, array in arrays.items() if name.startswith('examples_')}
         decision = meta['decision']

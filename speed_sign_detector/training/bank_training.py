@@ -373,11 +373,12 @@ def train_from_located(located: LocatedCrops, config: TrainingConfig,
                                               weight=config.real_filter_weight)
         feature_rows = [sign_features(patch_set) for patch_set in patch_sets]
         feature_labels = list(patch_labels)
-        real_labels = set(found_labels) | composite_labels
+        crop_labels = set(found_labels)
         if scenes is not None and len(scenes):
             feature_rows.append(scenes.features)
             feature_labels += scenes.labels
-            real_labels |= set(scenes.labels)
+            crop_labels |= set(scenes.labels)
+        real_labels = crop_labels | composite_labels
         features = np.concatenate(feature_rows)
         # every label weighs the same in total (rare limits are not drowned)
         counts = Counter(feature_labels)
@@ -390,6 +391,9 @@ def train_from_located(located: LocatedCrops, config: TrainingConfig,
         else:
             opinion = fit_second_opinion(features, feature_labels, config.ridge, weights,
                                          real_labels=sorted(real_labels))
+        # which real labels it saw real crops of (the rest: composites of real digits only)
+        opinion = dataclasses.replace(opinion, crop_labels=tuple(
+            label for label in opinion.labels if label in crop_labels))
     counts_by_label = Counter(labels)
     record = dict(provenance or {})
     record.update(crops=len(labels), located=int(found.sum()),
