@@ -17,7 +17,9 @@ World and camera (metres, right-handed, y down):
   radius 0.32 to 0.40 m, turned slightly out of the image plane. A sign grows from
   5-10 px radius to 35-50 px before it leaves the image at the right edge and is
   visible for about 2 s (the first sign) to 4 s at the default speed. The truth lists
-  a sign while its radius is at least 5 px and 3/4 of its box lies inside the image.
+  a sign while 3/4 of its box lies inside the image and its radius is at least 5 px, or
+  3.5 px for an end sign (:func:`min_truth_radius_px`: from where the edge the detector
+  votes on reaches its least radius).
 - Look-alikes: end-of-limit signs and other round signs (no overtaking, no entry,
   weight/width/height limits, ...), half each.
 - Distractors: lamp globes (growing circles), a vehicle ahead with a spare wheel and
@@ -41,14 +43,20 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
-from speed_sign_detector.truth import TruthRow
+from speed_sign_detector.truth import TruthRow, is_end_of_limit_kind
 
 #: Lighting choices of a drive.
 LIGHTING_CHOICES: tuple[str, ...] = ('day', 'dusk', 'night', 'mixed')
 #: Darkness of each fixed lighting (0 = day, 0.5 = dusk, 1 = night).
 DARKNESS: dict[str, float] = {'day': 0.0, 'dusk': 0.5, 'night': 1.0}
-#: A sign is in the truth while its radius is at least this, pixels.
+#: A sign with a red ring (a limit, most look-alikes) is in the truth while its radius is
+#: at least this, pixels: the detector votes on the ring's inner edge (0.66 of the radius),
+#: which reaches the detector's least radius (``detector.min_radius_px``, 3.5 px) there.
 MIN_TRUTH_RADIUS_PX = 5.0
+#: An end sign (end of limit, end of all restrictions: a thin black rim, no red ring) from
+#: this radius, pixels: the detector votes on its outer edge, so it is found, and read,
+#: from the detector's least radius.
+MIN_TRUTH_RADIUS_END_SIGN_PX = 3.5
 #: ... and at least this fraction of its box lies inside the image.
 MIN_TRUTH_VISIBLE_FRACTION = 0.75
 
@@ -214,6 +222,13 @@ def _sign_image(kind: str, diameter_px: int) -> tuple[np.ndarray, np.ndarray]:
 
     bgr, alpha = render_sign(kind, diameter_px)
     return bgr.astype(np.float32), alpha.astype(np.float32)
+
+
+def min_truth_radius_px(kind: str) -> float:
+    """The least radius, pixels, at which the truth lists a sign of this kind:
+    :data:`MIN_TRUTH_RADIUS_END_SIGN_PX` for an end sign (no red ring), else
+    :data:`MIN_TRUTH_RADIUS_PX`."""
+    return MIN_TRUTH_RADIUS_END_SIGN_PX if is_end_of_limit_kind(kind) else MIN_TRUTH_RADIUS_PX
 
 
 #: Kinds the renderer draws that the drives leave out, so that a drive of a given seed stays
@@ -587,7 +602,8 @@ class SyntheticDrive:
         inside_w = max(0.0, min(box[2], width) - max(box[0], 0.0))
         inside_h = max(0.0, min(box[3], height) - max(box[1], 0.0))
         fraction = inside_w * inside_h / max((box[2] - box[0]) * (box[3] - box[1]), 1e-9)
-        visible = radius_px >= MIN_TRUTH_RADIUS_PX and fraction >= MIN_TRUTH_VISIBLE_FRACTION
+        visible = (radius_px >= min_truth_radius_px(sign.kind)
+                   and fraction >= MIN_TRUTH_VISIBLE_FRACTION)
         return _SignView(u_px, v_px, radius_px, width_factor, box if visible else None)
 
     def _draw_sign(self, image: np.ndarray, sign: SignPlacement, view: _SignView,

@@ -5,7 +5,12 @@ import numpy as np
 import pytest
 
 from speed_sign_detector.recognition.templates import SIGN_KINDS
-from speed_sign_detector.synthetic import DriveConfig, SyntheticDrive
+from speed_sign_detector.synthetic import (
+    MIN_TRUTH_RADIUS_END_SIGN_PX,
+    DriveConfig,
+    SyntheticDrive,
+    min_truth_radius_px,
+)
 from speed_sign_detector.truth import group_tracks
 
 
@@ -106,3 +111,34 @@ def test_night_is_darker_than_day_and_mixed_goes_from_day_to_night() -> None:
 def test_invalid_settings_raise_value_error(changes: dict) -> None:
     with pytest.raises(ValueError):
         DriveConfig(**changes)
+
+
+def test_end_sign_is_listed_from_the_detectors_least_radius_limits_from_5_px() -> None:
+    """An end sign has no red ring: the detector votes on its outer edge and finds (and
+    reads) it from its least radius, 3.5 px, where a limit's ring is still too small. The
+    ``make demo`` drive (seed 7, 24 s, mixed): its end of 50 is listed from frame 83
+    (2.77 s, radius 3.52 px), so the pipeline's reading at 3.77 s (true radius 4.3 px)
+    falls inside its listing; every other sign from its first row of 5 px on."""
+    drive = SyntheticDrive(DriveConfig(seed=7, duration_s=24.0, lighting='mixed'))
+    tracks = {track.track_id: track for track in group_tracks(all_truth(drive))}
+    assert [tracks[track_id].kind for track_id in sorted(tracks)] == [
+        '30', '20', 'end_of_limit_50', '5', '60', 'height_limit', '100']
+    end_sign = tracks[3]
+    assert end_sign.rows[0].frame == 83
+    assert end_sign.rows[0].radius_px == pytest.approx(3.517, abs=1e-3)
+    assert 113 in {row.frame for row in end_sign.rows}   # the demo's reading, 3.77 s
+    assert min_truth_radius_px('end_of_limit_50') == MIN_TRUTH_RADIUS_END_SIGN_PX == 3.5
+    assert min_truth_radius_px('end_of_restrictions') == 3.5
+    assert min_truth_radius_px('50') == min_truth_radius_px('height_limit') == 5.0
+    # The sign coming from afar (all but the first, in view at the start) enter at 5 px.
+    for track_id in (2, 4, 5, 6, 7):
+        assert 5.0 <= tracks[track_id].rows[0].radius_px < 5.05, track_id
+    # At its first listed frame the end sign is plainly drawn: its white disc stands out.
+    frame = drive.frame(83)
+    row = next(row for row in frame.truth if row.track_id == 3)
+    gray = frame.bgr.mean(axis=2)
+    rows, cols = np.mgrid[0:gray.shape[0], 0:gray.shape[1]]
+    distance = np.hypot(cols + 0.5 - row.centre_px[0], rows + 0.5 - row.centre_px[1])
+    disc = gray[distance <= 0.8 * row.radius_px].mean()
+    around = gray[(distance >= 1.5 * row.radius_px) & (distance <= 2.5 * row.radius_px)].mean()
+    assert disc > around + 60.0
