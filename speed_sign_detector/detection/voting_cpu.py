@@ -195,6 +195,7 @@ class CPUVoter:
         self._flat_offsets: dict[tuple[int, int], np.ndarray] = {}
         self._helper = (ThreadPoolExecutor(1, thread_name_prefix='cpu-voting')
                         if threads > 1 and len(self.bands) > 1 else None)
+        self._helper_pid = os.getpid()   # a forked child has no helper thread
 
     def close(self) -> None:
         """End the helper thread (idempotent); voting goes on in the calling thread."""
@@ -226,7 +227,7 @@ class CPUVoter:
             return [self.packed_band(edges[self.bands[index].level], index, frame_size,
                                      bins[self.bands[index].level]) for index in indices]
 
-        if self._helper is None:
+        if self._helper is None or os.getpid() != self._helper_pid:
             return vote(list(range(len(self.bands))))
         mine, helpers = self._split_bands(edges)
         helped = self._helper.submit(vote, helpers)
