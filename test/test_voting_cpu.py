@@ -252,3 +252,18 @@ def test_voting_on_two_threads_equals_one_thread() -> None:
         helped.close()
         helped.close()   # idempotent
     assert helped.packed_votes(edges, (320, 240))[0].shape == (240, 320)   # on one thread
+
+
+def test_auto_keeps_gl_on_a_hardware_renderer_without_a_trial(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """On a renderer that is not a CPU one, auto neither builds the CPU path nor times it."""
+    from speed_sign_detector.detection import detector as detector_module
+
+    monkeypatch.setattr(detector_module, 'is_software_renderer', lambda renderer: False)
+    with Detector(DetectorConfig(), backend='auto') as detector:
+        assert detector.backend_name == 'gl'
+        assert detector.backend_choice.startswith('auto: gl on a hardware renderer')
+        for _ in range(WARMUP_FRAMES + TIMED_FRAMES + 1):
+            assert detector.detect(synthetic_scene())
+        assert detector.backend_name == 'gl' and detector.trial_decision is None
+        assert detector._cpu is None
