@@ -29,7 +29,8 @@ reference's above 0.9997 and their totals agree to 0.2 %, with the same candidat
 
 A band that votes toward both sides of its edges keeps both directions' stencils side
 by side in one table row, so that each chunk costs one look-up and one ``np.bincount``.
-The bands are split over two threads (:data:`VOTING_THREADS`).
+On hosts of more than 2 cores the bands are split over two threads
+(:data:`VOTING_THREADS`).
 """
 from __future__ import annotations
 
@@ -58,9 +59,12 @@ DIRECTION_BINS = 1024
 """Gradient directions a stencil is kept for (a power of two; 2 pi / 1024 = 0.35 deg)."""
 EDGES_PER_CHUNK = 4096
 """Edge pixels voted per ``np.bincount`` (their stencils' temporaries stay in the cache)."""
-VOTING_THREADS = min(2, os.cpu_count() or 1)
+VOTING_THREADS = 2 if (os.cpu_count() or 1) > 2 else 1
 """Threads that vote (bands split between them; numpy's take and bincount release the
-GIL). Two: on a 2-core host the other core is shared with recognition anyway."""
+GIL). One on a host of 2 cores or fewer: there the pipeline recognizes the previous frame
+on the other core, and a voting helper thread took its time (on the 2-core host, eval
+bag with 2 voting threads against 1, interleaved: detection no faster (43-75 ms either
+way), the classifier 2-48 % slower, 4-26 % fewer frames per second)."""
 FIXED_POINT_ONE = 1 << 16
 """Integer units per 1.0 of a vote's weight and count (finer when the bound allows)."""
 _MANTISSA_BITS = 52  # float64 holds every integer below 2^53 exactly
@@ -179,8 +183,8 @@ class CPUVoter:
         config: detector settings (bands, polarity, vote profile).
 
     Building the stencils takes about 0.1-0.3 s per config; flat offsets are cached per
-    vote-image width. With :data:`VOTING_THREADS` 2 the bands are split into two groups of
-    about equal work, one voted on a helper thread; :meth:`close` ends it.
+    vote-image width. With ``threads`` 2 the bands are split into two groups of about
+    equal work, one voted on a helper thread; :meth:`close` ends it.
     """
 
     def __init__(self, config: DetectorConfig, threads: int = VOTING_THREADS) -> None:
