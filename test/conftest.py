@@ -3,6 +3,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import cv2
+import numpy as np
 import pytest
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
@@ -17,6 +19,15 @@ def shared_data_dir() -> Path:
         pytest.skip(f'real data not available: {SHARED_DATA_DIR} does not exist '
                     '(it lives beside the project checkout, see README "Data")')
     return SHARED_DATA_DIR
+
+
+@pytest.fixture(scope='session')
+def gtsdb_scene(shared_data_dir: Path) -> np.ndarray:
+    """A real GTSDB road scene (816x480 gray) with plenty of clutter."""
+    path = shared_data_dir / 'gtsdb-dev' / 'images' / '00001.jpg'
+    gray = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+    assert gray is not None, f'cannot read {path}'
+    return gray
 
 
 @pytest.fixture(scope='module')

@@ -3,9 +3,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from pathlib import Path
 
-import cv2
 import numpy as np
 import pytest
 from test_detection_synthetic import ring_frame
@@ -25,14 +23,6 @@ CONFIGS = {
     'two_bands': DetectorConfig(radius_bands=2),
 }
 
-
-@pytest.fixture(scope='module')
-def scene(shared_data_dir: Path) -> np.ndarray:
-    """A real GTSDB road scene (816x480 gray) with plenty of clutter."""
-    path = shared_data_dir / 'gtsdb-dev' / 'images' / '00001.jpg'
-    gray = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-    assert gray is not None, f'cannot read {path}'
-    return gray
 
 
 def synthetic_scene() -> np.ndarray:
@@ -93,23 +83,23 @@ def test_backends_agree_on_synthetic_scene(name: str, vote_method: str) -> None:
 
 
 @pytest.mark.parametrize('vote_method', VOTE_METHODS)
-def test_backends_agree_on_real_scene(scene: np.ndarray, vote_method: str) -> None:
-    assert_backends_agree(scene, with_method(CONFIGS['default'], vote_method))
+def test_backends_agree_on_real_scene(gtsdb_scene: np.ndarray, vote_method: str) -> None:
+    assert_backends_agree(gtsdb_scene, with_method(CONFIGS['default'], vote_method))
 
 
 @pytest.mark.parametrize('vote_method', VOTE_METHODS)
-def test_backends_agree_at_640x480(scene: np.ndarray, vote_method: str) -> None:
-    assert_backends_agree(np.ascontiguousarray(scene[:, 88:728]),
+def test_backends_agree_at_640x480(gtsdb_scene: np.ndarray, vote_method: str) -> None:
+    assert_backends_agree(np.ascontiguousarray(gtsdb_scene[:, 88:728]),
                           with_method(CONFIGS['default'], vote_method))
 
 
-def test_scatter_votes_are_reproducible(scene: np.ndarray) -> None:
+def test_scatter_votes_are_reproducible(gtsdb_scene: np.ndarray) -> None:
     """Integer sums do not depend on the (atomic, unordered) edge list order."""
     config = with_method(CONFIGS['default'], 'scatter')
     with Detector(config, backend='gl') as gl:
-        first = gl.vote_images(scene)
-        second = gl.vote_images(scene[::-1, ::-1].copy())
-        third = gl.vote_images(scene)
+        first = gl.vote_images(gtsdb_scene)
+        second = gl.vote_images(gtsdb_scene[::-1, ::-1].copy())
+        third = gl.vote_images(gtsdb_scene)
     for one, other in zip(first, third):
         np.testing.assert_array_equal(one, other)
     assert any(not np.array_equal(one, other) for one, other in zip(first, second))

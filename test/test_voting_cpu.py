@@ -4,9 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-from pathlib import Path
 
-import cv2
 import numpy as np
 import pytest
 from test_detection_backends import CONFIGS, assert_same_candidates, synthetic_scene
@@ -50,14 +48,6 @@ CPU_CONFIGS = {
                                    vote_pixels_per_radius=1.0),
 }
 
-
-@pytest.fixture(scope='module')
-def scene(shared_data_dir: Path) -> np.ndarray:
-    """A real GTSDB road scene (816x480 gray) with plenty of clutter."""
-    path = shared_data_dir / 'gtsdb-dev' / 'images' / '00001.jpg'
-    gray = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-    assert gray is not None, f'cannot read {path}'
-    return gray
 
 
 def assert_same_edges(gray: np.ndarray, config: DetectorConfig) -> None:
@@ -104,10 +94,10 @@ def test_cpu_path_matches_the_reference_on_a_synthetic_scene(name: str) -> None:
     assert_same_votes(gray, CPU_CONFIGS[name])
 
 
-def test_cpu_path_matches_the_reference_on_a_real_scene(scene: np.ndarray) -> None:
-    assert_same_edges(scene, DetectorConfig())
-    assert_same_votes(scene, DetectorConfig())
-    assert_same_votes(np.ascontiguousarray(scene[:, 88:728]), DetectorConfig())
+def test_cpu_path_matches_the_reference_on_a_real_scene(gtsdb_scene: np.ndarray) -> None:
+    assert_same_edges(gtsdb_scene, DetectorConfig())
+    assert_same_votes(gtsdb_scene, DetectorConfig())
+    assert_same_votes(np.ascontiguousarray(gtsdb_scene[:, 88:728]), DetectorConfig())
 
 
 @pytest.mark.parametrize('backend', ['cpu', 'gl'])
