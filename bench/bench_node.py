@@ -323,6 +323,7 @@ def main(argv: list[str] | None = None) -> int:
         'width': args.width, 'height': args.height,
         'backend': client.diagnostics.get('backend', ''),
         'renderer': client.diagnostics.get('gl_renderer', ''),
+        'backend_choice': client.diagnostics.get('backend_choice', ''),
         'rates': [asdict(result) for result in results],
         'targets': {'fps': TARGET_FPS, 'rss_mb': TARGET_RSS_MB},
         'meets_fps_target': bool(results) and results[0].output_fps >= 0.95 * TARGET_FPS

@@ -34,6 +34,7 @@ METHOD_LABELS: dict[str, str] = {
     'gl': 'ours, GL (default)',
     'gl_raster': 'ours, GL raster (paper)',
     'gl_scatter': 'ours, GL scatter',
+    'cpu': 'ours, CPU',
     'numpy': 'ours, numpy reference',
     'hough_gradient': 'cv2 HOUGH_GRADIENT',
     'hough_gradient_alt': 'cv2 HOUGH_GRADIENT_ALT',
@@ -102,7 +103,7 @@ def _detector_lines(detector: Mapping[str, Any]) -> list[str]:
     for name, size in sizes.items():
         rows = size['methods']
         gl = rows['gl']
-        peers = [m for m in rows if not m.startswith('gl') and m != 'numpy']
+        peers = [m for m in rows if not m.startswith('gl') and m not in ('cpu', 'numpy')]
         fastest = min(peers, key=lambda m: rows[m]['median_ms'])
         text = (f"  {name}: GL {_number(gl['median_ms'])} ms; fastest peer "
                 f"{METHOD_LABELS.get(fastest, fastest)} {_number(rows[fastest]['median_ms'])} "
@@ -118,6 +119,9 @@ def _detector_lines(detector: Mapping[str, Any]) -> list[str]:
                 top = max(peers, key=lambda m: rows[m]['recall'])
                 text += (f"; no peer within 0.05 of GL's recall {gl['recall']:.3f} (best peer "
                          f"{METHOD_LABELS.get(top, top)} {rows[top]['recall']:.3f})")
+        if 'cpu' in rows:
+            text += (f"; CPU {_number(rows['cpu']['median_ms'])} ms; backend: auto keeps "
+                     f"{size.get('auto_pick', '?')} here")
         lines.append(text)
         if size.get('gl_floor_ms') is not None:
             lines.append(f"    GL floor at {name} (frame upload, one trivial compute pass, "
@@ -272,7 +276,9 @@ def _plot_sweeps(sweeps: Mapping[str, Any], path: Path) -> None:
     import matplotlib.pyplot as plt
 
     figure, (left, right) = plt.subplots(1, 2, figsize=(9, 4))
-    for backend in ('gl', 'numpy'):
+    for backend in ('gl', 'cpu', 'numpy'):
+        if f'{backend}_ms' not in sweeps['max_radius'][0]:
+            continue  # a run from before the CPU path
         label = METHOD_LABELS[backend]
         left.plot([r['max_radius_px'] for r in sweeps['max_radius']],
                   [r[f'{backend}_ms'] for r in sweeps['max_radius']], marker='o', label=label)

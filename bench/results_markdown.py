@@ -24,6 +24,7 @@ METHOD_LABELS: dict[str, str] = {
     'gl': 'ours, GL (default vote method)',
     'gl_raster': 'ours, GL raster (the paper\'s)',
     'gl_scatter': 'ours, GL scatter',
+    'cpu': 'ours, CPU',
     'numpy': 'ours, numpy reference',
     'hough_gradient': 'cv2 HOUGH_GRADIENT',
     'hough_gradient_alt': 'cv2 HOUGH_GRADIENT_ALT',
@@ -31,12 +32,27 @@ METHOD_LABELS: dict[str, str] = {
     'radsym_frst': 'radsym FRST',
 }
 
+#: Short names of the backends ``backend: auto`` chooses between (summary rows).
+AUTO_LABELS: dict[str, str] = {'gl': 'GL', 'cpu': 'CPU'}
+
 SMOKE_NOTE = ('> **Smoke run** (`--quick`): a handful of frames and crops, run to check the '
               'machinery. These figures are not measurements; run `make bench` for them.')
 
 
 def _label(method: str) -> str:
     return METHOD_LABELS.get(method, method)
+
+
+def is_ours(method: str) -> bool:
+    """True for our detector methods (GL of either vote method, CPU, numpy)."""
+    return method.startswith('gl') or method in ('cpu', 'numpy')
+
+
+def backend_phrase(section: Mapping[str, Any]) -> str:
+    """The detector backend of a pipeline or node section, with how auto chose it when
+    the run recorded that (``backend_choice``), e.g. ``cpu (auto: cpu, 21.0 ms ...)``."""
+    choice = section.get('backend_choice')
+    return f"{section.get('backend', '?')}" + (f' ({choice})' if choice else '')
 
 
 def _problem(section: Any) -> str | None:
@@ -72,20 +88,37 @@ def host_line(results: Mapping[str, Any]) -> str:
 
 
 # ------------------------------------------------------------------------------ summary
+def _ours_summary(detector: Mapping[str, Any], size: Mapping[str, Any]) -> str:
+    """Our cell of a detector summary row: the backend ``backend: auto`` keeps on this host
+    (``auto_pick``; on a run without a CPU row, GL), then the other of GL and CPU."""
+    methods = size['methods']
+    if 'cpu' not in methods:
+        ours = methods['gl']
+        return f"recall {_number(ours['recall'], 3)}, {_number(ours['median_ms'])} ms"
+    pick = size.get('auto_pick') or 'gl'
+    other = 'cpu' if pick == 'gl' else 'gl'
+    why = ('the faster of GL and CPU on this software renderer'
+           if detector.get('software_renderer') else 'auto keeps GL on a hardware renderer')
+    return (f"{AUTO_LABELS[pick]}, what `backend: auto` runs here ({why}): recall "
+            f"{_number(methods[pick]['recall'], 3)}, {_number(methods[pick]['median_ms'])} "
+            f"ms; {AUTO_LABELS[other]}: recall {_number(methods[other]['recall'], 3)}, "
+            f"{_number(methods[other]['median_ms'])} ms")
+
+
 def _detector_summary(detector: Mapping[str, Any]) -> list[str]:
-    """Summary rows of the detector: ours against the fastest peer and the best-recall one."""
+    """Summary rows of the detector: ours (the backend auto keeps here, and the other of GL
+    and CPU) against the fastest peer and the best-recall one."""
     rows = []
     for name, size in detector['sizes'].items():
         if size['signs'] is None:
             continue
         methods = size['methods']
-        peers = [m for m in methods if not m.startswith('gl') and m != 'numpy']
-        ours = methods['gl']
+        peers = [m for m in methods if not is_ours(m)]
         fastest = min(peers, key=lambda m: methods[m]['median_ms'])
         best = max(peers, key=lambda m: methods[m]['recall'] or 0.0)
         rows.append([
             f"detector, {name}: candidate recall@{detector['top_n']}, median ms per frame",
-            f"recall {_number(ours['recall'], 3)}, {_number(ours['median_ms'])} ms",
+            _ours_summary(detector, size),
             f"fastest: {_label(fastest)}, recall {_number(methods[fastest]['recall'], 3)}, "
             f"{_number(methods[fastest]['median_ms'])} ms; highest recall: {_label(best)}, "
             f"recall {_number(methods[best]['recall'], 3)}, "
@@ -121,7 +154,8 @@ def summary_lines(results: Mapping[str, Any]) -> list[str]:
         rows.append([f"pipeline, {pipeline['width']}x{pipeline['height']} synthetic drive: "
                      f"frames per second",
                      f"{_number(pipeline.get('overlapped_fps'))} fps overlapped, "
-                     f"{_number(pipeline['fps'])} serial", '-'])
+                     f"{_number(pipeline['fps'])} serial; detector backend "
+                     f"{pipeline.get('backend', '?')}", '-'])
     node = results.get('node')
     if _problem(node):
         rows.append(['node through DDS', _problem(node) or '', ''])
@@ -130,7 +164,8 @@ def summary_lines(results: Mapping[str, Any]) -> list[str]:
             rows.append([f"node through DDS, {node['width']}x{node['height']} at "
                          f"{rate['publish_hz']:g} Hz: frames answered per second",
                          f"{_number(rate['output_fps'])} fps, "
-                         f"{rate['dropped']} of {rate['published']} unanswered", '-'])
+                         f"{rate['dropped']} of {rate['published']} unanswered; detector "
+                         f"backend {node.get('backend') or '?'}", '-'])
     rows += summary_rows(results)
     lines += _table(['benchmark', 'ours', 'peers'], rows, right_aligned_from=3)
     if isinstance(classifier, Mapping) and classifier.get('crops_seen_in_training'):
@@ -141,6 +176,22 @@ def summary_lines(results: Mapping[str, Any]) -> list[str]:
 
 
 # ------------------------------------------------------------------------ one per stage
+def _auto_sentence(detector: Mapping[str, Any]) -> str:
+    """' `backend: auto` here: ...' naming the backend auto keeps at each size, or ''."""
+    picks = {name: size['auto_pick'] for name, size in detector['sizes'].items()
+             if size.get('auto_pick')}
+    if not picks:
+        return ''
+    if detector.get('software_renderer'):
+        rule, basis = 'times GL and CPU on its first frames and keeps the faster', \
+            ' (the lower median of this run)'
+    else:
+        rule, basis = 'keeps GL (a hardware renderer)', ''
+    return (f' `backend: auto` on this host {rule}: ' + ', '.join(
+        f'{AUTO_LABELS.get(pick, pick)} at {name}' for name, pick in picks.items())
+            + f'{basis}.')
+
+
 def detector_lines(detector: Mapping[str, Any]) -> list[str]:
     """Detector tables: time and recall per method and size; recall by radius; sweeps."""
     sizes: Mapping[str, Any] = detector['sizes']
@@ -148,7 +199,8 @@ def detector_lines(detector: Mapping[str, Any]) -> list[str]:
              f"GTSDB-dev scenes holding a speed-limit sign ({detector['frames_available']} "
              f"available; frames used per size below), top-{detector['top_n']} candidates; a "
              f"sign is found when a candidate centre lies within max(3, 0.35 r) px of it. "
-             f"Default vote method: {detector.get('gl_vote_method', '?')}.", '']
+             f"Default vote method: {detector.get('gl_vote_method', '?')}."
+             + _auto_sentence(detector), '']
     header = ['method']
     for name, size in sizes.items():
         header.append(f'{name} ms')
@@ -186,13 +238,17 @@ def detector_lines(detector: Mapping[str, Any]) -> list[str]:
     if sweeps:
         lines += ['', f"### Time against max radius and edge count, {sweeps['size']} "
                       f"({sweeps['frames']} frames, median ms)", '']
-        lines += _table(['max_radius_px', 'GL ms', 'numpy ms'],
-                        [[f"{row['max_radius_px']:g}", _number(row['gl_ms']),
-                          _number(row['numpy_ms'])] for row in sweeps['max_radius']])
+        backends = [name for name in ('gl', 'cpu', 'numpy')
+                    if f'{name}_ms' in sweeps['max_radius'][0]]
+        titles = [f"{AUTO_LABELS.get(name, name)} ms" for name in backends]
+        lines += _table(['max_radius_px', *titles],
+                        [[f"{row['max_radius_px']:g}",
+                          *(_number(row[f'{name}_ms']) for name in backends)]
+                         for row in sweeps['max_radius']])
         lines.append('')
-        lines += _table(['gradient_threshold', 'edge pixels', 'GL ms', 'numpy ms'],
+        lines += _table(['gradient_threshold', 'edge pixels', *titles],
                         [[f"{row['gradient_threshold']:g}", f"{row['edges']:.0f}",
-                          _number(row['gl_ms']), _number(row['numpy_ms'])]
+                          *(_number(row[f'{name}_ms']) for name in backends)]
                          for row in sweeps['edge_count']])
     return lines
 
@@ -235,7 +291,8 @@ def pipeline_lines(pipeline: Mapping[str, Any]) -> list[str]:
     """The pipeline table: fps serial and overlapped, latency, stage medians."""
     lines = ['## Pipeline', '',
              f"`Pipeline` on {pipeline['frames']} frames of a synthetic drive at "
-             f"{pipeline['width']}x{pipeline['height']}, backend {pipeline['backend']}.", '']
+             f"{pipeline['width']}x{pipeline['height']}, detector backend "
+             f"{backend_phrase(pipeline)}.", '']
     lines += _table(['figure', 'value'], [
         ['fps, one frame at a time', _number(pipeline['fps'])],
         ['fps, detection overlapping recognition (the node\'s default)',
@@ -251,7 +308,7 @@ def node_lines(node: Mapping[str, Any]) -> list[str]:
     """The node table: one row per publishing rate."""
     lines = ['## Node through DDS', '',
              f"The installed `speed_sign_detector` fed {node['width']}x{node['height']} "
-             f"frames over DDS (backend {node['backend']}).", '']
+             f"frames over DDS (detector backend {backend_phrase(node)}).", '']
     lines += _table(['published Hz', 'seconds', 'fps answered', 'unanswered',
                      'latency p50 ms', 'latency p95 ms', 'RSS MiB'],
                     [[f"{rate['publish_hz']:g}", f"{rate['seconds']:g}",

@@ -6,7 +6,8 @@
 detector stage (GTSDB scenes, ``../shared/data/gtsdb-dev``)
     per-frame time (median over the frames) and candidate recall@7 (top 7 candidates;
     hit: centre within ``max(3, 0.35 r)`` px of the sign's box centre, as ``speed_sign_eval
-    scenes``) of the GL detector, the numpy reference, ``cv2.HoughCircles``
+    scenes``) of the GL detector (both vote methods), the CPU path (``backend: cpu``),
+    the numpy reference, ``cv2.HoughCircles``
     (HOUGH_GRADIENT and HOUGH_GRADIENT_ALT) and ``radsym`` (RSD and FRST), with the peers'
     tuned parameters of ``bench_detector.py``. Frame sizes:
 
@@ -20,7 +21,9 @@ detector stage (GTSDB scenes, ``../shared/data/gtsdb-dev``)
     ours) at every size, so the resized sizes show how time grows with pixels, and
     signs upscaled beyond 40 px radius are missed by every method alike.
     Methods are interleaved frame by frame, so machine load hits them alike.
-    Sweeps (816x480, GL and numpy): time vs ``max_radius_px`` and time vs edge count
+    Per size, ``auto_pick`` is the backend ``backend: auto`` keeps on this host (the
+    faster of GL and CPU on a software renderer, else GL).
+    Sweeps (816x480, GL, CPU and numpy): time vs ``max_radius_px`` and time vs edge count
     (``gradient_threshold`` varied; edges counted with ``voting_numpy.compute_edges``).
 
 classifier (GTSRB crops, ``../shared/data/gtsrb-dev``)

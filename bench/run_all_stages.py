@@ -38,8 +38,10 @@ from speed_sign_detector.config import (  # noqa: E402
     load_yaml,
     to_parameters,
 )
-from speed_sign_detector.detection.detector import Detector  # noqa: E402
-from speed_sign_detector.detection.voting_gl import SOFTWARE_RENDERERS  # noqa: E402
+from speed_sign_detector.detection.detector import (  # noqa: E402
+    Detector,
+    is_software_renderer,
+)
 from speed_sign_detector.detection.voting_numpy import compute_edges  # noqa: E402
 from speed_sign_detector.errors import SpeedSignError  # noqa: E402
 from speed_sign_detector.overlapped_pipeline import OverlappedPipeline  # noqa: E402
@@ -63,7 +65,10 @@ DETECTOR_SIZES: tuple[tuple[str, int, int, str, bool], ...] = (
     ('1280x720', 1280, 720, 'resize', True),
     ('1920x1080', 1920, 1080, 'resize', False),
 )
-OUR_METHODS = ('gl', 'numpy')
+#: Our detector backends timed in the sweeps (``{name}_ms`` columns).
+OUR_METHODS = ('gl', 'cpu', 'numpy')
+#: The backends ``backend: auto`` chooses between (the CPU path only on a software renderer).
+AUTO_CANDIDATES = ('gl', 'cpu')
 PEER_METHODS = ('hough_gradient', 'hough_gradient_alt', 'radsym_rsd', 'radsym_frst')
 
 
@@ -176,20 +181,35 @@ def detector_methods(config: DetectorConfig) -> tuple[dict[str, bench_detector.M
     """Every detector method by name, and our Detector objects (to close).
 
     ``gl`` is the config as given (``vote_method='auto'`` picks scatter); ``gl_raster``
-    or ``gl_scatter`` is the other vote method.
+    or ``gl_scatter`` is the other vote method; ``cpu`` is the vectorised CPU path
+    (``backend: cpu``), ``numpy`` the reference.
     """
     gl = Detector(config, backend='gl')
     other_method = 'raster' if gl.vote_method == 'scatter' else 'scatter'
     other = Detector(dataclasses.replace(config, vote_method=other_method), backend='gl')
+    cpu = Detector(config, backend='cpu')
     numpy_detector = Detector(config, backend='numpy')
     methods = {'gl': bench_detector._detector_method(gl),
                f'gl_{other_method}': bench_detector._detector_method(other),
+               'cpu': bench_detector._detector_method(cpu),
                'numpy': bench_detector._detector_method(numpy_detector),
                'hough_gradient': bench_detector.hough_gradient,
                'hough_gradient_alt': bench_detector.hough_gradient_alt,
                'radsym_rsd': bench_detector._radsym_method('rsd'),
                'radsym_frst': bench_detector._radsym_method('frst')}
-    return methods, [gl, other, numpy_detector]
+    return methods, [gl, other, cpu, numpy_detector]
+
+
+def auto_pick(rows: dict[str, dict[str, object]], software_renderer: bool) -> str:
+    """The backend ``backend: auto`` keeps on this host, from one size's method rows.
+
+    On a software renderer auto times GL and the CPU path on the first frames and keeps
+    the faster (here: the lower median of the run; a tie keeps GL, as the trial does); on
+    a hardware renderer it keeps GL without timing the CPU path.
+    """
+    if not software_renderer or 'cpu' not in rows:
+        return 'gl'
+    return min(AUTO_CANDIDATES, key=lambda name: (rows[name]['median_ms'], name != 'gl'))
 
 
 def detector_stage(settings: BenchSettings) -> dict[str, object]:
@@ -207,10 +227,11 @@ def detector_stage(settings: BenchSettings) -> dict[str, object]:
     config = DetectorConfig()
     methods, detectors = detector_methods(config)
     renderer = detectors[0].renderer
+    our_warmed = [name for name in methods if name.startswith('gl') or name == 'cpu']
     result: dict[str, object] = {
         'renderer': renderer, 'backend_gl': detectors[0].backend_name,
         'gl_vote_method': detectors[0].vote_method,
-        'software_renderer': any(name in renderer.lower() for name in SOFTWARE_RENDERERS),
+        'software_renderer': is_software_renderer(renderer),
         'config': dataclasses.asdict(config), 'frames_available': len(limit_files),
         'top_n': bench_detector.TOP_N, 'peer_radius_px': [bench_detector.MIN_RADIUS_PX,
                                                           bench_detector.MAX_RADIUS_PX],
@@ -233,8 +254,8 @@ def detector_stage(settings: BenchSettings) -> dict[str, object]:
                         signs_by_bin.get(_size_bin(sign.radius_px), 0) + 1
                 signs_total += len(signs)
                 for method_name, method in methods.items():
-                    if index == 0 and method_name == 'gl':
-                        method(image)  # warm-up: shaders and per-size GL resources
+                    if index == 0 and method_name in our_warmed:
+                        method(image)  # warm-up: shaders, per-size GL resources, stencils
                     start = time.perf_counter()
                     centres = method(image)
                     times[method_name].append(1e3 * (time.perf_counter() - start))
@@ -262,6 +283,8 @@ def detector_stage(settings: BenchSettings) -> dict[str, object]:
                 else None, 'methods': rows}
             fastest = min(PEER_METHODS, key=lambda m: rows[m]['median_ms'])
             result['sizes'][size_name]['fastest_peer'] = fastest
+            result['sizes'][size_name]['auto_pick'] = auto_pick(
+                rows, bool(result['software_renderer']))
             result['sizes'][size_name]['gl_floor_ms'] = bench_detector.gl_floor_ms(width, height)
             log(f'detector {size_name}: {len(size_files)} frames, {signs_total} signs, '
                  f'{time.perf_counter() - started:.0f} s; ' + ', '.join(
@@ -290,7 +313,7 @@ def _time_detector(config: DetectorConfig, backend: str, frames: Sequence[np.nda
 
 def detector_sweeps(settings: BenchSettings, frames: Sequence[np.ndarray],
                     base: DetectorConfig) -> dict[str, list[dict[str, float]]]:
-    """GL and numpy time vs max radius, and vs edge count (gradient threshold varied)."""
+    """GL, CPU and numpy time vs max radius, and vs edge count (gradient threshold varied)."""
     radius_rows = []
     for max_radius in settings.max_radii_px:
         config = dataclasses.replace(base, max_radius_px=max_radius)
@@ -369,6 +392,7 @@ def pipeline_stage(settings: BenchSettings) -> dict[str, object]:
                 recognized.append(frame_result.recognized_limit_kmh)
         elapsed = time.perf_counter() - started
         backend, renderer = pipeline.backend_name, pipeline.renderer
+        backend_choice = pipeline.backend_choice
         # the same frames with detection overlapping recognition (the node's default)
         pipeline.reset()
         overlapped_recognized: list[int] = []
@@ -386,7 +410,7 @@ def pipeline_stage(settings: BenchSettings) -> dict[str, object]:
                 overlapped.submit(gray, stamp_s=index / 30.0)
         overlapped_elapsed = time.perf_counter() - started
     result = {'frames': len(frames) - 2, 'width': 640, 'height': 480, 'backend': backend,
-              'renderer': renderer, 'fps': (len(frames) - 2) / elapsed,
+              'backend_choice': backend_choice, 'renderer': renderer, 'fps': (len(frames) - 2) / elapsed,
               'overlapped_fps': (len(frames) - 2) / overlapped_elapsed,
               'overlapped_limits_recognized': overlapped_recognized,
               'latency_p50_ms': _percentile(stages['total'], 50),
@@ -396,7 +420,7 @@ def pipeline_stage(settings: BenchSettings) -> dict[str, object]:
               'params_file': str(settings.pipeline_params) if settings.pipeline_params
               else None}
     log(f'pipeline: {result["fps"]:.1f} fps serial, {result["overlapped_fps"]:.1f} fps '
-         f'overlapped, p50 {result["latency_p50_ms"]:.0f} ms')
+         f'overlapped, p50 {result["latency_p50_ms"]:.0f} ms; detector {backend_choice}')
     return result
 
 

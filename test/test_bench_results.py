@@ -33,7 +33,7 @@ def _method(median_ms: float, recall: float | None) -> dict[str, Any]:
 def fake_results() -> dict[str, Any]:
     """A run's results with figures unlike each other, so that each can be found."""
     methods_640 = {'gl': _method(20.25, 0.989), 'gl_raster': _method(29.5, 0.987),
-                   'numpy': _method(85.5, 0.988), 'hough_gradient': _method(2.75, 0.193),
+                   'cpu': _method(12.75, 0.984), 'numpy': _method(85.5, 0.988), 'hough_gradient': _method(2.75, 0.193),
                    'hough_gradient_alt': _method(9.25, 0.331),
                    'radsym_rsd': _method(40.5, 0.612), 'radsym_frst': _method(55.75, 0.871)}
     methods_816 = {name: _method(item['median_ms'] * 1.3 + 0.1, item['recall'])
@@ -56,19 +56,21 @@ def fake_results() -> dict[str, Any]:
             'sizes': {
                 '640x480': {'width': 640, 'height': 480, 'how': 'crop', 'frames': 60,
                             'signs': 75, 'signs_by_radius_px': None, 'methods': methods_640,
-                            'gl_floor_ms': 1.25},
+                            'gl_floor_ms': 1.25, 'auto_pick': 'gl'},
                 '816x480': {'width': 816, 'height': 480, 'how': 'native', 'frames': 60,
                             'signs': 80, 'signs_by_radius_px': {'4-8': 30, '8-16': 50},
-                            'methods': methods_816, 'gl_floor_ms': 1.5},
+                            'methods': methods_816, 'gl_floor_ms': 1.5, 'auto_pick': 'gl'},
                 '1920x1080': {'width': 1920, 'height': 1080, 'how': 'resize', 'frames': 2,
                               'signs': None, 'signs_by_radius_px': None,
-                              'methods': methods_1080, 'gl_floor_ms': None}},
+                              'methods': methods_1080, 'gl_floor_ms': None,
+                              'auto_pick': 'gl'}},
             'sweeps': {'size': '816x480', 'frames': 6,
-                       'max_radius': [{'max_radius_px': 20.0, 'gl_ms': 11.5, 'numpy_ms': 61.5},
-                                      {'max_radius_px': 80.0, 'gl_ms': 31.5,
+                       'max_radius': [{'max_radius_px': 20.0, 'gl_ms': 11.5, 'cpu_ms': 7.5,
+                                       'numpy_ms': 61.5},
+                                      {'max_radius_px': 80.0, 'gl_ms': 31.5, 'cpu_ms': 17.25,
                                        'numpy_ms': 161.5}],
                        'edge_count': [{'gradient_threshold': 40.0, 'edges': 12345.0,
-                                       'gl_ms': 21.5, 'numpy_ms': 91.5}]}},
+                                       'gl_ms': 21.5, 'cpu_ms': 9.75, 'numpy_ms': 91.5}]}},
         'classifier': {'crops': 4400, 'crop_every': 1, 'classifier_accuracy': 0.9713,
                        'classifier_ms_per_crop': 4.56, 'ncc_baseline_accuracy': 0.5821,
                        'ncc_baseline_ms_per_crop': 7.89,
@@ -81,10 +83,12 @@ def fake_results() -> dict[str, Any]:
                        'speed_frames': 10, 'bank_mb': 3.4, 'bank_load_or_build_s': 0.7,
                        'crops_seen_in_training': True},
         'pipeline': {'frames': 90, 'width': 640, 'height': 480, 'backend': 'gl',
+                     'backend_choice': 'auto: gl on a hardware renderer (Example GL Renderer 7)',
                      'renderer': 'Example GL Renderer 7', 'fps': 26.4, 'overlapped_fps': 33.2,
                      'latency_p50_ms': 37.5, 'latency_p95_ms': 48.5,
                      'stage_p50_ms': {'detect': 20.5, 'classify': 16.5, 'total': 37.5}},
         'node': {'width': 640, 'height': 480, 'backend': 'gl',
+                 'backend_choice': 'asked for gl (Example GL Renderer 7)',
                  'renderer': 'Example GL Renderer 7',
                  'rates': [{'publish_hz': 10.0, 'seconds': 8.0, 'published': 80,
                             'answered': 80, 'dropped': 0, 'output_fps': 10.0,
@@ -144,8 +148,13 @@ def test_summary_sets_ours_against_the_peers(markdown: ModuleType) -> None:
     assert len(detector_rows) == 2
     methods = results['detector']['sizes']['640x480']['methods']
     ours, peers = detector_rows[0][1], detector_rows[0][2]
+    # a hardware renderer: auto keeps GL, named first; the CPU path beside it
+    assert ours.startswith('GL, what `backend: auto` runs here'), ours
     assert f"{methods['gl']['recall']:.3f}" in ours and f"{methods['gl']['median_ms']:.1f}" in ours
-    peer_names = [name for name in methods if not name.startswith('gl') and name != 'numpy']
+    assert f"CPU: recall {methods['cpu']['recall']:.3f}, {methods['cpu']['median_ms']:.1f} ms" \
+        in ours
+    peer_names = [name for name in methods if not markdown.is_ours(name)]
+    assert 'cpu' not in peer_names and 'hough_gradient' in peer_names
     fastest = min(peer_names, key=lambda name: methods[name]['median_ms'])
     best = max(peer_names, key=lambda name: methods[name]['recall'])
     assert markdown.METHOD_LABELS[fastest] in peers and markdown.METHOD_LABELS[best] in peers
@@ -155,6 +164,43 @@ def test_summary_sets_ours_against_the_peers(markdown: ModuleType) -> None:
     assert f"{classifier['ncc_baseline_accuracy']:.3f}" in classifier_row[2]
     node_rows = [row for row in rows if row[0].startswith('node')]
     assert len(node_rows) == len(results['node']['rates'])
+
+
+def test_summary_names_the_cpu_path_when_auto_keeps_it(markdown: ModuleType) -> None:
+    """On a software renderer auto keeps the faster of GL and CPU: the summary names it
+    first, and says why; the detector section names auto's pick at each size."""
+    results = copy.deepcopy(fake_results())
+    detector = results['detector']
+    detector['renderer'], detector['software_renderer'] = 'llvmpipe (LLVM 17.0.6)', True
+    for size in detector['sizes'].values():
+        size['auto_pick'] = 'cpu'
+    parts = sections(markdown.render_results_markdown(results))
+    ours = [row[1] for row in table_rows(parts['Summary']) if row[0].startswith('detector')]
+    methods = detector['sizes']['640x480']['methods']
+    assert ours[0].startswith('CPU, what `backend: auto` runs here (the faster of GL and CPU '
+                              'on this software renderer): recall '
+                              f"{methods['cpu']['recall']:.3f}, "
+                              f"{methods['cpu']['median_ms']:.1f} ms; GL: recall"), ours[0]
+    assert 'keeps the faster: CPU at 640x480, CPU at 816x480, CPU at 1920x1080' \
+        in parts['Detector']
+
+
+def test_a_run_without_the_cpu_row_keeps_gl_in_the_summary(markdown: ModuleType) -> None:
+    """A results.json from before the CPU path (no ``cpu`` method, sweep column, auto_pick
+    or backend_choice) still renders: GL is ours, the sweeps have GL and numpy only."""
+    results = copy.deepcopy(fake_results())
+    for size in results['detector']['sizes'].values():
+        del size['methods']['cpu'], size['auto_pick']
+    for row in results['detector']['sweeps']['max_radius'] + \
+            results['detector']['sweeps']['edge_count']:
+        del row['cpu_ms']
+    del results['pipeline']['backend_choice'], results['node']['backend_choice']
+    parts = sections(markdown.render_results_markdown(results))
+    methods = results['detector']['sizes']['640x480']['methods']
+    ours = next(row[1] for row in table_rows(parts['Summary']) if row[0].startswith('detector'))
+    assert ours == f"recall {methods['gl']['recall']:.3f}, {methods['gl']['median_ms']:.1f} ms"
+    assert ['max_radius_px', 'GL ms', 'numpy ms'] in table_rows(parts['Detector'])
+    assert 'detector backend gl.' in parts['Pipeline']
 
 
 def test_each_benchmark_has_its_table(markdown: ModuleType) -> None:
@@ -180,6 +226,10 @@ def test_each_benchmark_has_its_table(markdown: ModuleType) -> None:
                for row in classifier_rows)
     for width, count in results['classifier']['count_by_size_px'].items():
         assert row_starting(classifier_rows, width)[1] == str(count)
+    sweep_rows = table_rows(parts['Detector'].split('### Time against')[1])
+    assert row_starting(sweep_rows, '20') == ['20', '11.5', '7.5', '61.5']  # GL, CPU, numpy
+    assert results['pipeline']['backend_choice'] in parts['Pipeline']
+    assert results['node']['backend_choice'] in parts['Node through DDS']
     pipeline_rows = table_rows(parts['Pipeline'])
     assert f"{results['pipeline']['overlapped_fps']:.1f}" in {row[-1] for row in pipeline_rows}
     node_rows = table_rows(parts['Node through DDS'])

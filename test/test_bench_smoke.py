@@ -1,6 +1,6 @@
 """Smoke test of the benchmark driver: bench/run_all.py on 2 scenes and 3 crops.
 
-Runs the real stages (GL and numpy detectors, cv2.HoughCircles, radsym, the classifier
+Runs the real stages (GL, CPU and numpy detectors, cv2.HoughCircles, radsym, the classifier
 against the NCC baseline, the Pipeline) on a few real frames and crops into tmp_path,
 and checks that the JSON, the table and the PNG plots are written with the expected
 keys. No timing figure is asserted; the node stage (DDS, a second process) is left to
@@ -20,7 +20,7 @@ import pytest
 from speed_sign_detector.config import ClassifierConfig
 
 BENCH_DIR = Path(__file__).resolve().parents[1] / 'bench'
-METHODS = {'gl', 'numpy', 'hough_gradient', 'hough_gradient_alt', 'radsym_rsd', 'radsym_frst'}
+METHODS = {'gl', 'cpu', 'numpy', 'hough_gradient', 'hough_gradient_alt', 'radsym_rsd', 'radsym_frst'}
 
 
 def bench_module(name: str) -> Any:
@@ -93,6 +93,8 @@ def test_writes_the_markdown_report_of_the_run(results: dict) -> None:
     summary = written.split('## Summary', 1)[1].split('\n## ', 1)[0]
     assert saved['detector']['renderer'] in summary
     assert saved['machine']['cpu_model'] in summary
+    assert f"| {markdown.METHOD_LABELS['cpu']} |" in written  # the CPU path's row
+    assert saved['pipeline']['backend_choice'] in written
 
 
 def test_detector_section_has_every_method_size_and_sweep(results: dict) -> None:
@@ -109,11 +111,14 @@ def test_detector_section_has_every_method_size_and_sweep(results: dict) -> None
         for row in size['methods'].values():
             assert row['median_ms'] > 0
             assert 0.0 <= row['recall'] <= 1.0
+        # auto keeps the faster of GL and CPU on a software renderer, GL on a hardware one
+        faster = min(('gl', 'cpu'), key=lambda name: size['methods'][name]['median_ms'])
+        assert size['auto_pick'] == (faster if detector['software_renderer'] else 'gl')
     sweeps = detector['sweeps']
     assert [row['max_radius_px'] for row in sweeps['max_radius']] == [20.0, 40.0]
     low, high = sweeps['edge_count']
     assert low['edges'] > high['edges'] > 0  # a higher gradient threshold keeps fewer edges
-    assert all(row['gl_ms'] > 0 and row['numpy_ms'] > 0
+    assert all(row['gl_ms'] > 0 and row['cpu_ms'] > 0 and row['numpy_ms'] > 0
                for row in sweeps['max_radius'] + sweeps['edge_count'])
 
 
@@ -128,6 +133,7 @@ def test_classifier_and_pipeline_sections(results: dict) -> None:
     assert pipeline['frames'] == 3 and pipeline['fps'] > 0
     assert {'detect', 'classify', 'track', 'total'} <= set(pipeline['stage_p50_ms'])
     assert pipeline['backend'] in {'gl', 'cpu', 'numpy'}
+    assert pipeline['backend_choice']  # how the backend was chosen, in words
 
 
 def test_run_all_without_the_node_stage_needs_no_rclpy() -> None:
