@@ -111,10 +111,7 @@ def block_maxima(votes: Sequence[np.ndarray], bands: Sequence[RadiusBand],
         qy = block_rows * step + arg[better] // step
         qx = block_cols * step + arg[better] % step
         centre = score[qy, qx]
-        offset_x = _parabola_offset(_clamped(score, qy, qx - 1), centre,
-                                    _clamped(score, qy, qx + 1))
-        offset_y = _parabola_offset(_clamped(score, qy - 1, qx), centre,
-                                    _clamped(score, qy + 1, qx))
+        offset_x, offset_y = subpixel_offsets(score, qy, qx)
         half_step = 0.5 * (band.target_scale - 1)
         best[better] = centre
         x_px[better] = band.target_scale * (qx + offset_x) + half_step
@@ -127,6 +124,19 @@ def block_maxima(votes: Sequence[np.ndarray], bands: Sequence[RadiusBand],
 def _clamped(image: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
     """``image[rows, cols]`` with indices clamped to the image (edge pixels repeat)."""
     return image[np.clip(rows, 0, image.shape[0] - 1), np.clip(cols, 0, image.shape[1] - 1)]
+
+
+def subpixel_offsets(score: np.ndarray, rows: np.ndarray, columns: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """(x, y) sub-pixel offsets, pixels in [-0.5, 0.5], of the peaks of ``score`` (H, W)
+    at ``rows``, ``columns`` (N,): the vertex of a parabola through each peak and its two
+    neighbours along each axis (the border repeated)."""
+    centre = score[rows, columns]
+    offset_x = _parabola_offset(_clamped(score, rows, columns - 1), centre,
+                                _clamped(score, rows, columns + 1))
+    offset_y = _parabola_offset(_clamped(score, rows - 1, columns), centre,
+                                _clamped(score, rows + 1, columns))
+    return offset_x, offset_y
 
 
 def _parabola_offset(minus: np.ndarray, centre: np.ndarray, plus: np.ndarray) -> np.ndarray:

@@ -19,9 +19,8 @@ import numpy as np
 from speed_sign_detector.detection.candidates import (
     BlockMaxima,
     Candidate,
-    _clamped,
-    _parabola_offset,
     select_candidates,
+    subpixel_offsets,
 )
 from speed_sign_detector.detection.voting_cpu import VoteStencils
 
@@ -132,10 +131,7 @@ class _BandBlocks:
             qy = block_rows * step + arg // step
             qx = block_cols * step + arg % step
             centre = score_image[qy, qx]
-            offset_x = _parabola_offset(_clamped(score_image, qy, qx - 1), centre,
-                                        _clamped(score_image, qy, qx + 1))
-            offset_y = _parabola_offset(_clamped(score_image, qy - 1, qx), centre,
-                                        _clamped(score_image, qy + 1, qx))
+            offset_x, offset_y = subpixel_offsets(score_image, qy, qx)
             half_step = 0.5 * (band.target_scale - 1)
             where = np.unravel_index(slots[won], shape)
             score[where] = centre
