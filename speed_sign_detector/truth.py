@@ -20,7 +20,8 @@ header, naming these columns in any order (further columns are ignored):
 =============  ===============================================================
 
 One row per frame in which the sign is visible (``speed_sign_synth`` lists a sign
-while its radius is at least 5 px and 3/4 of its box lies inside the image). Signs
+while its radius is at least 5 px, 3.5 px for end signs, which have no red ring, and 3/4
+of its box lies inside the image). Signs
 that set no limit (``limit_kmh = 0``: look-alikes, end-of-limit signs) are listed too:
 evaluation counts a limit reported on them as a wrong limit, and checks that
 end-of-limit signs (kind ``end_of_limit...``) are read as such.

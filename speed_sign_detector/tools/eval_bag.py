@@ -128,8 +128,8 @@ if TYPE_CHECKING:
 #: Default grace after a sign left the image within which recognizing it still counts, s.
 DEFAULT_GRACE_S = 1.0
 #: How long before a sign's first listed frame recognizing its value (or its end of limit)
-#: still counts for it, s: the truth lists a sign from 5 px and 3/4 inside the image, and
-#: a sign can be read a few frames before that.
+#: still counts for it, s: the truth lists a sign from 5 px (3.5 px for end signs) and 3/4
+#: inside the image, and a sign can be read a few frames before that.
 EARLY_RECOGNITION_S = 0.5
 #: File endings a contact sheet may have.
 CONTACT_SHEET_SUFFIXES: tuple[str, ...] = ('.png', '.jpg', '.jpeg')
