@@ -101,6 +101,12 @@ def main(argv: list[str] | None = None) -> int:
     except SpeedSignError as err:
         print(f'speed_sign_replay: error: {err}', file=sys.stderr)
         return 1
+    except Exception:
+        # Ctrl-C: rclpy's signal handler shuts the context down before Python raises
+        # KeyboardInterrupt, so a publish in between fails with "context is invalid"
+        if not rclpy.ok():
+            return 130
+        raise
     finally:
         bag.close()
         rclpy.try_shutdown()
