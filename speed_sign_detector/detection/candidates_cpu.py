@@ -3,11 +3,11 @@
 :func:`.candidates.block_maxima` (the numpy twin of the GL reduction) takes each band's
 two-channel vote image, finds the best pixel of every block in every band and keeps the
 best band per block. :func:`packed_block_maxima` gives the same result, bit for bit,
-from the CPU path's packed sums (:mod:`.voting_cpu`) with less work: it unpacks only
-the weight channel (the score) of every pixel and the count at the chosen pixels; it
-takes each band's block maxima with two reductions (no tile copies), chooses the winning
-band per block first, and looks for the best pixel's place only in the blocks a band
-wins. :func:`select_packed_candidates` goes further for the detector: it locates only
+from the CPU path's packed sums (:mod:`.voting_cpu`) with less work: a band's score is
+a non-decreasing function of its packed sum, so it takes each band's block maxima on
+the sums themselves (strided maxima, no score image) and scores only those; it chooses
+the winning band per block first, and scores pixels (and unpacks counts) only in the
+blocks a band wins. :func:`select_packed_candidates` goes further for the detector: it locates only
 the blocks the top-N selection visits.
 """
 from __future__ import annotations
@@ -69,7 +69,15 @@ FIRST_BLOCKS = 64
 
 
 class _BandBlocks:
-    """Every band's score image and block maxima, and the winning band per block."""
+    """Every band's block maxima and the winning band per block, from the packed sums.
+
+    A band's score is a non-decreasing function of its packed sum (:func:`_scores`: the
+    weight field is the high bits, then float32 roundings and a positive factor), so the
+    best score of a block is the score of its largest packed sum: the block maxima are
+    taken on the sums (one pass, no score image) and only the located blocks' pixels are
+    scored (where the first best pixel of a tile needs the scores themselves: pixels of
+    equal score may hold different counts).
+    """
 
     def __init__(self, packed: Sequence[np.ndarray], stencils: Sequence[VoteStencils],
                  frame_shape: tuple[int, int], block_px: int,
@@ -77,29 +85,18 @@ class _BandBlocks:
         height, width = frame_shape
         rows, cols = -(-height // block_px), -(-width // block_px)
         self.packed, self.stencils = packed, stencils
-        self.scores: list[np.ndarray] = []
-        self.tiles: list[np.ndarray] = []
+        self.normalisers = tuple(np.float32(normaliser) for normaliser in normalisers)
+        self.steps: list[int] = []
         band_best = np.full((len(packed), rows, cols), -np.inf, np.float32)
         for index, (sums, band_stencils, normaliser) in enumerate(
-                zip(packed, stencils, normalisers, strict=True)):
-            weight = np.multiply(sums, 1.0 / band_stencils.count_scale)
-            np.floor(weight, out=weight)
-            weight *= 1.0 / band_stencils.weight_one   # a power of two: exact
+                zip(packed, stencils, self.normalisers, strict=True)):
             step = max(1, block_px // band_stencils.band.target_scale)
-            # the score image is the top left of the padded one (a band's image is never
-            # larger than its blocks: H_target = H >> level <= rows x step)
-            padded = np.empty((rows * step, cols * step), np.float32)
-            score = padded[:sums.shape[0], :sums.shape[1]]
-            # as the reference: float32 weight sum, times the float32 normaliser
-            np.copyto(score, weight, casting='same_kind')
-            score *= np.float32(normaliser)
-            padded[sums.shape[0]:] = -np.inf
-            padded[:sums.shape[0], sums.shape[1]:] = -np.inf
-            # rows of each block first (contiguous rows), then the columns
-            band_best[index] = padded.reshape(rows, step, cols * step).max(axis=1).reshape(
-                rows, cols, step).max(axis=2)
-            self.scores.append(score)
-            self.tiles.append(padded.reshape(rows, step, cols, step))
+            self.steps.append(step)
+            # a band's image is never larger than its blocks (H_target = H >> level <=
+            # rows x step); the blocks it does not reach stay -inf
+            region = _block_max(sums[:rows * step, :cols * step], step)
+            band_best[index, :region.shape[0], :region.shape[1]] = _scores(
+                region, band_stencils, normaliser)
         self.winner = np.argmax(band_best, axis=0)   # the first band on ties, as the reference
         self.best = np.take_along_axis(band_best, self.winner[None], axis=0)[0]
         self.cols = cols
@@ -118,20 +115,25 @@ class _BandBlocks:
         x_px, y_px, radius_px = (np.zeros(shape, np.float32) for _ in range(3))
         band_index = np.zeros(shape, np.int32)
         winners = self.winner.ravel()[blocks]
-        for index, (sums, stencils, score_image, tiles) in enumerate(
-                zip(self.packed, self.stencils, self.scores, self.tiles)):
+        for index, (sums, stencils, normaliser, step) in enumerate(
+                zip(self.packed, self.stencils, self.normalisers, self.steps)):
             won = winners == index
             if not np.any(won):
                 continue
             band = stencils.band
-            step = tiles.shape[1]
             block_rows, block_cols = np.divmod(blocks[won], self.cols)
-            chosen = tiles[block_rows, :, block_cols, :].reshape(-1, step * step)
-            arg = chosen.argmax(axis=1)             # row-major in the tile, as the reference
+            within = np.arange(step)
+            tile_rows = (block_rows[:, None] * step + within)[:, :, None]   # (N, step, 1)
+            tile_cols = (block_cols[:, None] * step + within)[:, None, :]   # (N, 1, step)
+            inside = (tile_rows < sums.shape[0]) & (tile_cols < sums.shape[1])
+            tiles = np.where(inside, _scores(
+                sums[np.minimum(tile_rows, sums.shape[0] - 1),
+                     np.minimum(tile_cols, sums.shape[1] - 1)], stencils, normaliser),
+                np.float32(-np.inf))
+            arg = tiles.reshape(-1, step * step).argmax(axis=1)  # row-major, as the reference
             qy = block_rows * step + arg // step
             qx = block_cols * step + arg % step
-            centre = score_image[qy, qx]
-            offset_x, offset_y = subpixel_offsets(score_image, qy, qx)
+            centre, offset_x, offset_y = _peak(sums, stencils, normaliser, qy, qx)
             half_step = 0.5 * (band.target_scale - 1)
             where = np.unravel_index(slots[won], shape)
             score[where] = centre
@@ -140,6 +142,55 @@ class _BandBlocks:
             radius_px[where] = _radius_ratio(sums[qy, qx], stencils) * band.scale
             band_index[where] = band.index
         return BlockMaxima(score, x_px, y_px, radius_px, band_index)
+
+
+def _block_max(image: np.ndarray, step: int) -> np.ndarray:
+    """(ceil(H / step), ceil(W / step)) maxima of the step x step blocks of an (H, W)
+    image (the last row and column of blocks may be cut short), by strided maxima."""
+    for axis in (0, 1):
+        if step > 1:
+            lines = [slice(None), slice(None)]
+            lines[axis] = slice(0, None, step)
+            best = image[tuple(lines)].copy()
+            for start in range(1, min(step, image.shape[axis])):
+                lines[axis] = slice(start, None, step)
+                part = image[tuple(lines)]
+                target = best[:part.shape[0]] if axis == 0 else best[:, :part.shape[1]]
+                np.maximum(target, part, out=target)
+            image = best
+    return image
+
+
+def _scores(sums: np.ndarray, stencils: VoteStencils, normaliser: np.float32) -> np.ndarray:
+    """float32 scores of packed sums, rounded as the reference rounds them: the float32
+    weight sum times the float32 normaliser (a non-decreasing function of the sums)."""
+    weight = np.multiply(sums, 1.0 / stencils.count_scale)   # powers of two: exact
+    np.floor(weight, out=weight)
+    weight *= 1.0 / stencils.weight_one
+    score = weight.astype(np.float32)
+    score *= normaliser
+    return score
+
+
+_CROSS_DY = np.array([0, 0, 0, -1, 1])
+_CROSS_DX = np.array([0, -1, 1, 0, 0])
+
+
+def _peak(sums: np.ndarray, stencils: VoteStencils, normaliser: np.float32,
+          rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Score and sub-pixel offsets ``(x, y)`` of the peaks at ``rows``, ``cols`` (N,) of a
+    band's packed sums, as :func:`.candidates.subpixel_offsets` finds them in the score
+    image: the scores of each peak's cross of 5 pixels (clamped to the image, as it
+    clamps) are laid out as (N x 3, 3) patches, peak ``i`` at ``(3 i + 1, 1)``."""
+    cross_rows = np.minimum(np.maximum(rows[:, None] + _CROSS_DY, 0), sums.shape[0] - 1)
+    cross_cols = np.minimum(np.maximum(cols[:, None] + _CROSS_DX, 0), sums.shape[1] - 1)
+    patches = np.zeros((rows.size, 3, 3), np.float32)
+    patches[:, 1 + _CROSS_DY, 1 + _CROSS_DX] = _scores(sums[cross_rows, cross_cols],
+                                                        stencils, normaliser)
+    centres = np.arange(rows.size) * 3 + 1
+    offset_x, offset_y = subpixel_offsets(patches.reshape(-1, 3), centres,
+                                          np.ones_like(centres))
+    return patches[:, 1, 1], offset_x, offset_y
 
 
 def _radius_ratio(sums: np.ndarray, stencils: VoteStencils) -> np.ndarray:
