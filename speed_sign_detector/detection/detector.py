@@ -22,10 +22,10 @@ import time
 from types import TracebackType
 from typing import Self
 
-import cv2
 import numpy as np
 
 from speed_sign_detector.config import DetectorConfig
+from speed_sign_detector.detection.area_scaling import scale_area
 from speed_sign_detector.detection.backend_trial import BackendTrial, TrialDecision
 from speed_sign_detector.detection.candidates import (
     BlockMaxima,
@@ -122,7 +122,7 @@ def working_frame(gray: np.ndarray, config: DetectorConfig, min_size_px: int = 1
     if 0 < target < width:
         scaled_width = target
         scaled_height = max(1, round(band.shape[0] * target / width))
-        image = cv2.resize(band, (scaled_width, scaled_height), interpolation=cv2.INTER_AREA)
+        image = scale_area(band, (scaled_width, scaled_height))   # = cv2.INTER_AREA
     else:
         image = np.ascontiguousarray(band)
     if image.shape[0] < min_size_px or image.shape[1] < min_size_px:
