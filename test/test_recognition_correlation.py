@@ -6,11 +6,15 @@ import pytest
 
 from speed_sign_detector.recognition.correlation import (
     correlate,
+    correlation_peaks,
     disc_window,
+    inverse_planes,
     keep_inside,
     kth_law,
     peak_psr,
+    scene_spectra,
     scene_spectrum,
+    transposed_spectra,
 )
 from speed_sign_detector.recognition.mace import (
     mace_filter,
@@ -102,6 +106,32 @@ def test_peak_psr_per_plane_centres_equal_one_plane_at_a_time() -> None:
                          7, 2)
         for name in ('value', 'y', 'x', 'psr'):
             assert getattr(together, name)[index] == getattr(alone, name)[0], name
+
+@pytest.mark.parametrize('shape', [(64, 64), (54, 54), (45, 45)])
+def test_correlation_peaks_equal_peak_psr_of_the_planes(filter_50: np.ndarray,
+                                                        shape: tuple[int, int]) -> None:
+    """The classifier's peaks from the transposed products (the rows of the peak blocks
+    only) are bitwise those of peak_psr on the full planes, for one centre shared by
+    every plane and for a centre per plane (wrapping around index 0), with per-plane
+    search sizes."""
+    rng = np.random.default_rng(11)
+    filters = np.conj(np.fft.rfft2(rng.standard_normal((3,) + shape), s=shape)).astype(
+        np.complex64)
+    scenes = scene_spectra([_scene('50', (5, 7))[:shape[0], :shape[1]],
+                            rng.normal(128, 30, shape).astype(np.float32)], shape, 0.5)
+    planes = inverse_planes(filters * scenes[:, None], shape).reshape((-1,) + shape)
+    product = (transposed_spectra(filters) * transposed_spectra(scenes)[:, None]).reshape(
+        (-1, shape[1] // 2 + 1, shape[0]))
+    count = planes.shape[0]
+    per_plane = np.stack([rng.integers(0, shape[0], count), rng.integers(0, shape[1], count)],
+                         axis=1)
+    for centre, search in (((6, 6), 3), ((0, shape[1] - 1), np.arange(count) % 4 + 1),
+                           (per_plane, 2), (per_plane, np.arange(count) % 3 + 1)):
+        expected = peak_psr(planes, centre, search, 9, 2)
+        found = correlation_peaks(product.copy(), shape, centre, search, 9, 2)
+        for name in ('value', 'y', 'x', 'psr'):
+            np.testing.assert_array_equal(getattr(found, name), getattr(expected, name), name)
+
 
 def test_peak_psr_rejects_bad_windows() -> None:
     with pytest.raises(ValueError):

@@ -6,8 +6,9 @@ filters of that size (upright, of every class; then the rotated ones of the lead
 classes) and of its neighbouring sizes (the leaders' filters) score the classes.
 
 Every step runs for all positions at once: the correlations of every position with the
-filters of one size share one product and one batched inverse FFT, and their peaks one
-:func:`~.correlation.peak_psr` call. The answers are those of one position at a time.
+filters of one size share one product, one batched inverse FFT and one search for their
+peaks (:func:`~.correlation.correlation_peaks`, which transforms only the rows of the
+planes that the peak search reads). The answers are those of one position at a time.
 """
 from __future__ import annotations
 
@@ -22,12 +23,11 @@ import numpy as np
 
 from speed_sign_detector.config import ClassifierConfig
 from speed_sign_detector.recognition.correlation import (
-    correlate,
+    correlation_peaks,
     disc_window,
-    inverse_planes,
     keep_inside,
-    peak_psr,
     scene_spectra,
+    transposed_spectra,
 )
 from speed_sign_detector.recognition.filter_banks import SizeBank
 from speed_sign_detector.recognition.sign_polarity import is_lit_on_dark
@@ -96,25 +96,58 @@ class _Position:
     detection_psr: float = 0.0
     centre_y: float = 0.0  # the detected sign centre, ROI pixels (continuous)
     centre_x: float = 0.0
-    # by bank index: the masked classification window's spectrum, its top and left
+    # by bank index: the masked classification window's spectrum (in the layout of
+    # :func:`~.correlation.transposed_spectra`), its top and left
     spectra: dict[int, tuple[np.ndarray, int, int]] = field(default_factory=dict)
     # every classification filter's match, by class name
     found: dict[str, list[_Match]] = field(default_factory=dict)
     leaders: set[str] = field(default_factory=set)
 
 
+@dataclass(frozen=True)
+class TransposedFilters:
+    """The filter spectra of one size bank in the layout the correlation reads
+    (:func:`~.correlation.transposed_spectra`; the same values as the bank's).
+
+    Attributes:
+        detection: (Fd, N // 2 + 1, N) complex64 conjugated detection filter spectra.
+        classification: (Fc, M // 2 + 1, M) complex64 conjugated classification ones.
+    """
+
+    detection: np.ndarray
+    classification: np.ndarray
+
+    @classmethod
+    def of(cls, bank: SizeBank) -> TransposedFilters:
+        """The transposed filters of ``bank``."""
+        return cls(transposed_spectra(bank.detection), transposed_spectra(bank.classification))
+
+    @property
+    def nbytes(self) -> int:
+        """Memory of the spectra, bytes."""
+        return int(self.detection.nbytes + self.classification.nbytes)
+
+
 class EvidenceSearch:
     """Correlates positions of an image with the filter banks of a classifier."""
 
-    def __init__(self, config: ClassifierConfig, banks: Sequence[SizeBank]) -> None:
+    def __init__(self, config: ClassifierConfig, banks: Sequence[SizeBank],
+                 filters: Sequence[TransposedFilters] | None = None) -> None:
         """Index the banks.
 
         Args:
             config: the classifier's settings.
             banks: the filter banks, by increasing radius.
+            filters: their :class:`TransposedFilters` (made here when not given; searches
+                over the same banks can share them: :attr:`filters`).
         """
         self.config = config
         self.banks = tuple(banks)
+        self.filters = tuple(filters) if filters is not None else tuple(
+            TransposedFilters.of(bank) for bank in self.banks)
+        if len(self.filters) != len(self.banks):
+            raise ValueError(f'{len(self.filters)} transposed filter sets for '
+                             f'{len(self.banks)} banks')
         self.radii = np.asarray([bank.radius_px for bank in self.banks])
         # per size: the upright classification filters, and the filters of each class
         self._upright_filters = [np.flatnonzero(bank.class_rolls_deg == 0.0)
@@ -204,16 +237,18 @@ class EvidenceSearch:
         for index, group in jobs.items():
             bank = self.banks[index]
             size = bank.fft_size
-            filters = bank.detection.shape[0]
-            spectra = scene_spectra([sub for _, sub in group], (size, size),
-                                    self.config.kth_law)
-            planes = correlate(spectra[:, None], bank.detection, (size, size)).reshape(
-                -1, size, size)
+            detection = self.filters[index].detection
+            filters = detection.shape[0]
+            spectra = transposed_spectra(scene_spectra([sub for _, sub in group], (size, size),
+                                                       self.config.kth_law))
+            # (positions x filters) products conj(H) * S
+            product = (detection * spectra[:, None]).reshape((-1,) + detection.shape[1:])
             centre = (size - bank.canvas_px) // 2
             searches = np.repeat([max(1, int(math.ceil(self.config.position_search *
                                                          position.radius_scaled)))
                                   for position, _ in group], filters)
-            stats = peak_psr(planes, (centre, centre), searches, *self._lobes(bank.radius_px))
+            stats = correlation_peaks(product, (size, size), (centre, centre), searches,
+                                      *self._lobes(bank.radius_px))
             psr = stats.psr.reshape(-1, filters)
             tops = psr.argmax(axis=1)
             for slot, (position, _) in enumerate(group):
@@ -280,18 +315,18 @@ class EvidenceSearch:
             self._class_spectra([position for position, _, _ in group], index)
             spectra = [position.spectra[index] for position, _, _ in group]
             counts = [chosen.size for _, _, chosen in group]
+            classification = self.filters[index].classification
             if all(chosen is group[0][2] for _, _, chosen in group):
-                # the same filters for every position: (positions, filters) planes
+                # the same filters for every position: (positions x filters) products
                 scenes = np.stack([spectrum for spectrum, _, _ in spectra])[:, None]
-                planes = correlate(scenes, bank.classification[group[0][2]], (size, size))
+                product = (classification[group[0][2]] * scenes).reshape(
+                    (-1,) + classification.shape[1:])
             else:
-                product = bank.classification[np.concatenate([c for _, _, c in group])]
+                product = classification[np.concatenate([c for _, _, c in group])]
                 start = 0
                 for count, (spectrum, _, _) in zip(counts, spectra):
                     product[start:start + count] *= spectrum
                     start += count
-                planes = inverse_planes(product, (size, size))
-            planes = planes.reshape(-1, size, size)
             tops = np.repeat([top for _, top, _ in spectra], counts)
             lefts = np.repeat([left for _, _, left in spectra], counts)
             # the template's centre is at size / 2: the peak lies near the offset of the
@@ -301,7 +336,8 @@ class EvidenceSearch:
                   int(round(position.centre_x - left - size / 2.0)))
                  for (position, _, _), (_, top, left) in zip(group, spectra)], counts, axis=0)
             search = max(1, int(round(config.class_position_search * bank.radius_px)))
-            stats = peak_psr(planes, expected, search, *self._lobes(bank.radius_px))
+            stats = correlation_peaks(product, (size, size), expected, search,
+                                      *self._lobes(bank.radius_px))
             # circular -> signed shifts, then the sign's centre in ROI pixels
             centre_xs = (_signed_shift(stats.x, size) + lefts + size / 2.0).tolist()
             centre_ys = (_signed_shift(stats.y, size) + tops + size / 2.0).tolist()
@@ -340,7 +376,7 @@ class EvidenceSearch:
                           config.class_field_radius * bank.radius_px)
             fields.append(keep_inside(_window(scene, top, left, size), inner))
             corners.append((top, left))
-        spectra = scene_spectra(fields, (size, size), config.kth_law)
+        spectra = transposed_spectra(scene_spectra(fields, (size, size), config.kth_law))
         for position, spectrum, (top, left) in zip(missing, spectra, corners):
             position.spectra[index] = (spectrum, top, left)
 

@@ -116,13 +116,17 @@ class Classifier:
         self.banks: tuple[SizeBank, ...] = build_banks(config, trained_bank.class_examples)
         self.build_time_s = time.perf_counter() - start
         self._evidence = EvidenceSearch(config, self.banks)
-        self._framed_evidence = EvidenceSearch(framed_search_config(config), self.banks)
+        # the same filters (one transposed copy for both searches)
+        self._framed_evidence = EvidenceSearch(framed_search_config(config), self.banks,
+                                               self._evidence.filters)
         _LOG.debug('classifier banks: %d sizes, %.1f MB, %.2f s', len(self.banks),
                    self.bank_nbytes / 1e6, self.build_time_s)
 
     @property
     def bank_nbytes(self) -> int:
-        """Memory of all filter spectra, bytes."""
+        """Memory of the banks' filter spectra, bytes (the correlation reads a copy of
+        them in another layout, :class:`~.candidate_evidence.TransposedFilters`: the
+        classifier holds twice this)."""
         return sum(bank.nbytes for bank in self.banks)
 
     @property

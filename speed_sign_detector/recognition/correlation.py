@@ -126,6 +126,19 @@ def inverse_planes(product: np.ndarray, fft_shape: tuple[int, int]) -> np.ndarra
     return np.fft.irfft(product, n=fft_shape[1], axis=-1).astype(np.float32, copy=False)
 
 
+def transposed_spectra(spectra: np.ndarray) -> np.ndarray:
+    """Half spectra in the layout of :func:`correlation_peaks`: frequency columns first.
+
+    Args:
+        spectra: (..., Ny, Nx // 2 + 1) complex half spectra (:func:`numpy.fft.rfft2`
+            layout).
+
+    Returns:
+        (..., Nx // 2 + 1, Ny) C-contiguous complex64 copy (the same values).
+    """
+    return np.ascontiguousarray(np.swapaxes(np.asarray(spectra, np.complex64), -1, -2))
+
+
 @dataclass(frozen=True)
 class PeakStats:
     """Peaks of a stack of correlation planes.
@@ -142,6 +155,54 @@ class PeakStats:
     y: np.ndarray
     x: np.ndarray
     psr: np.ndarray
+
+
+@dataclass(frozen=True)
+class _PeakBlocks:
+    """Where :func:`peak_psr` reads each plane: the rows and columns of the square block
+    ``centre +/- (search_widest + sidelobe_half)`` (circular), which holds every sidelobe
+    square a peak in the search square can have.
+
+    Attributes:
+        rows, cols: (B,) plane rows / columns shared by every plane, or (F, B) per plane.
+        searches: (1,) or (F,) peak search half sizes.
+        search_widest: the largest of them.
+        flat: (B * B,) flat plane indices of the block, row by row, for one shared
+            centre (cached); ``None`` for per-plane centres.
+    """
+
+    rows: np.ndarray
+    cols: np.ndarray
+    searches: np.ndarray
+    search_widest: int
+    flat: np.ndarray | None
+
+
+def _peak_blocks(count: int, shape: tuple[int, int], centre_yx: tuple[int, int] | np.ndarray,
+                 search_half: int | np.ndarray, sidelobe_half: int, exclude_half: int
+                 ) -> _PeakBlocks:
+    """The :class:`_PeakBlocks` of ``count`` planes of ``shape`` (Ny, Nx); the arguments
+    as :func:`peak_psr` takes them."""
+    if exclude_half >= sidelobe_half:
+        raise ValueError('exclude_half must be smaller than sidelobe_half')
+    ny, nx = shape
+    centres = np.asarray(centre_yx).reshape(-1, 2)
+    searches = np.asarray(search_half).reshape(-1)
+    if len(centres) > 1 and (centres == centres[0]).all():
+        centres = centres[:1]
+    if len(searches) > 1 and (searches == searches[0]).all():
+        searches = searches[:1]
+    search_widest = int(searches.max())
+    if len(centres) == 1:
+        layout = _psr_layout((int(centres[0, 0]), int(centres[0, 1])), (ny, nx),
+                             search_widest, sidelobe_half)
+        return _PeakBlocks(layout.block_rows, layout.block_cols, searches, search_widest,
+                           layout.block_indices)
+    # per-plane centres: each plane's block around its own centre
+    offsets = np.arange(-(search_widest + sidelobe_half), search_widest + sidelobe_half + 1)
+    centres = np.broadcast_to(centres, (count, 2))
+    return _PeakBlocks((centres[:, :1] + offsets) % ny, (centres[:, 1:] + offsets) % nx,
+                       searches, search_widest, None)
 
 
 def peak_psr(planes: np.ndarray, centre_yx: tuple[int, int] | np.ndarray,
@@ -165,35 +226,65 @@ def peak_psr(planes: np.ndarray, centre_yx: tuple[int, int] | np.ndarray,
         :class:`PeakStats` with arrays of shape (F,).
     """
     count, ny, nx = planes.shape
-    if exclude_half >= sidelobe_half:
-        raise ValueError('exclude_half must be smaller than sidelobe_half')
-    centres = np.asarray(centre_yx).reshape(-1, 2)
-    searches = np.asarray(search_half).reshape(-1)
-    if len(centres) > 1 and (centres == centres[0]).all():
-        centres = centres[:1]
-    if len(searches) > 1 and (searches == searches[0]).all():
-        searches = searches[:1]
-    search_widest = int(searches.max())
-    if len(centres) == 1:
-        layout = _psr_layout((int(centres[0, 0]), int(centres[0, 1])), (ny, nx),
-                             search_widest, sidelobe_half)
-        # every sidelobe square lies in one block, centre +/- (search_half +
-        # sidelobe_half): copy that block once, then read each plane's square from a
-        # strided view of it
-        block_side = layout.block_side
-        block = planes.reshape(count, -1).take(layout.block_indices, axis=1).reshape(
-            count, block_side, block_side)
-        rows = cols = None
+    blocks = _peak_blocks(count, (ny, nx), centre_yx, search_half, sidelobe_half,
+                          exclude_half)
+    side = blocks.rows.shape[-1]
+    if blocks.flat is not None:
+        # copy the block once, then read each plane's square from a strided view of it
+        block = planes.reshape(count, -1).take(blocks.flat, axis=1)
     else:
-        # per-plane centres: each plane's block around its own centre
-        offsets = np.arange(-(search_widest + sidelobe_half), search_widest + sidelobe_half + 1)
-        centres = np.broadcast_to(centres, (count, 2))
-        rows = (centres[:, :1] + offsets) % ny
-        cols = (centres[:, 1:] + offsets) % nx
-        block_side = offsets.size
-        flat = (rows[:, :, None] * nx + cols[:, None, :]).reshape(count, -1)
-        block = np.take_along_axis(planes.reshape(count, -1), flat, axis=1).reshape(
-            count, block_side, block_side)
+        flat = (blocks.rows[:, :, None] * nx + blocks.cols[:, None, :]).reshape(count, -1)
+        block = np.take_along_axis(planes.reshape(count, -1), flat, axis=1)
+    return _block_peaks(block.reshape(count, side, side), blocks, sidelobe_half,
+                        exclude_half)
+
+
+def correlation_peaks(product: np.ndarray, fft_shape: tuple[int, int],
+                      centre_yx: tuple[int, int] | np.ndarray, search_half: int | np.ndarray,
+                      sidelobe_half: int, exclude_half: int) -> PeakStats:
+    """:func:`peak_psr` of the correlation planes of spectrum products, without forming
+    the planes: the same numbers, for the work of the rows the peak search reads.
+
+    The inverse FFT runs its first pass (over the rows' frequencies) on every column
+    frequency, then the second (real) pass only on the rows of each plane's block; the
+    values are those :func:`inverse_planes` gives there (the same one-dimensional
+    transforms of the same numbers).
+
+    Args:
+        product: (F, Nx // 2 + 1, Ny) complex64 products ``conj(H) * S`` in the layout of
+            :func:`transposed_spectra` (overwritten).
+        fft_shape: (Ny, Nx).
+        centre_yx, search_half, sidelobe_half, exclude_half: as :func:`peak_psr`.
+
+    Returns:
+        :class:`PeakStats` with arrays of shape (F,).
+    """
+    count = product.shape[0]
+    blocks = _peak_blocks(count, fft_shape, centre_yx, search_half, sidelobe_half,
+                          exclude_half)
+    np.fft.ifft(product, axis=-1, out=product)
+    rows, cols = blocks.rows, blocks.cols
+    if rows.ndim == 1:
+        lines = product.transpose(0, 2, 1)[:, rows]
+    else:
+        lines = product[np.arange(count)[:, None], :, rows]
+    # (F, B, Nx) float32 rows of the planes, then their block's columns
+    planes = np.fft.irfft(lines, n=fft_shape[1], axis=-1)
+    if cols.ndim == 1:
+        block = planes.take(cols, axis=2)
+    else:
+        side = cols.shape[1]
+        block = planes[np.arange(count)[:, None, None], np.arange(side)[None, :, None],
+                       cols[:, None, :]]
+    return _block_peaks(block, blocks, sidelobe_half, exclude_half)
+
+
+def _block_peaks(block: np.ndarray, blocks: _PeakBlocks, sidelobe_half: int,
+                 exclude_half: int) -> PeakStats:
+    """The peaks and PSRs of :func:`peak_psr` from each plane's block, (F, B, B) float32
+    (the plane's values at ``blocks.rows`` x ``blocks.cols``)."""
+    count = block.shape[0]
+    searches, search_widest = blocks.searches, blocks.search_widest
     search_side = 2 * search_widest + 1
     window = block[:, sidelobe_half:sidelobe_half + search_side,
                    sidelobe_half:sidelobe_half + search_side].reshape(count, -1)
@@ -219,8 +310,9 @@ def peak_psr(planes: np.ndarray, centre_yx: tuple[int, int] | np.ndarray,
     variance = region @ weights / sidelobe_count - mean * mean
     std = np.sqrt(np.maximum(variance, 0.0))
     psr = (peak_value - mean) / np.maximum(std, np.float32(1e-12))
-    if rows is None:
-        peak_y, peak_x = layout.search_rows[best_y], layout.search_cols[best_x]
+    rows, cols = blocks.rows, blocks.cols
+    if rows.ndim == 1:
+        peak_y, peak_x = rows[sidelobe_half + best_y], cols[sidelobe_half + best_x]
     else:
         every = np.arange(count)
         peak_y = rows[every, sidelobe_half + best_y]
@@ -250,14 +342,13 @@ class _PsrLayout:
             ``2 * (search_half + sidelobe_half) + 1``.
         block_indices: (block_side ** 2,) flat plane indices of the block, row by row
             (circular).
-        search_rows, search_cols: (2 * search_half + 1,) plane rows / columns of the peak
-            search square.
+        block_rows, block_cols: (block_side,) plane rows / columns of the block.
     """
 
     block_side: int
     block_indices: np.ndarray
-    search_rows: np.ndarray
-    search_cols: np.ndarray
+    block_rows: np.ndarray
+    block_cols: np.ndarray
 
 
 @functools.lru_cache(maxsize=256)  # ~65 layouts (~3 MB) on GTSRB crops and frames
@@ -267,10 +358,9 @@ def _psr_layout(centre_yx: tuple[int, int], shape: tuple[int, int], search_half:
     reach = search_half + sidelobe_half
     rows = (centre_yx[0] + np.arange(-reach, reach + 1)) % shape[0]
     cols = (centre_yx[1] + np.arange(-reach, reach + 1)) % shape[1]
-    search = slice(sidelobe_half, sidelobe_half + 2 * search_half + 1)
     layout = _PsrLayout(2 * reach + 1, (rows[:, None] * shape[1] + cols[None, :]).reshape(-1),
-                        rows[search], cols[search])
-    for array in (layout.block_indices, layout.search_rows, layout.search_cols):
+                        rows, cols)
+    for array in (layout.block_indices, layout.block_rows, layout.block_cols):
         array.flags.writeable = False
     return layout
 
