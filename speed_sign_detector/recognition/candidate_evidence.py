@@ -239,8 +239,8 @@ class EvidenceSearch:
             size = bank.fft_size
             detection = self.filters[index].detection
             filters = detection.shape[0]
-            spectra = transposed_spectra(scene_spectra([sub for _, sub in group], (size, size),
-                                                       self.config.kth_law))
+            spectra = scene_spectra([sub for _, sub in group], (size, size),
+                                    self.config.kth_law, transposed=True)
             # (positions x filters) products conj(H) * S
             product = (detection * spectra[:, None]).reshape((-1,) + detection.shape[1:])
             centre = (size - bank.canvas_px) // 2
@@ -376,7 +376,7 @@ class EvidenceSearch:
                           config.class_field_radius * bank.radius_px)
             fields.append(keep_inside(_window(scene, top, left, size), inner))
             corners.append((top, left))
-        spectra = transposed_spectra(scene_spectra(fields, (size, size), config.kth_law))
+        spectra = scene_spectra(fields, (size, size), config.kth_law, transposed=True)
         for position, spectrum, (top, left) in zip(missing, spectra, corners):
             position.spectra[index] = (spectrum, top, left)
 

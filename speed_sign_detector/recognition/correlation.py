@@ -17,7 +17,8 @@ import cv2
 import numpy as np
 
 
-def kth_law(spectrum: np.ndarray, k: float, fast: bool = False) -> np.ndarray:
+def kth_law(spectrum: np.ndarray, k: float, fast: bool = False,
+            out: np.ndarray | None = None) -> np.ndarray:
     """Raise spectrum magnitudes to the power ``k``, keeping the phase.
 
     Args:
@@ -26,23 +27,32 @@ def kth_law(spectrum: np.ndarray, k: float, fast: bool = False) -> np.ndarray:
         fast: for k = 0.5, scale by 1 / sqrt in float64 (4 times faster than the float32
             power; equal to it but for ~0.06% of the values, 1 float32 ulp apart there).
             Filter synthesis keeps the power, so that built banks equal cached ones.
+        out: complex64 array of the same shape (any memory layout, e.g. a transposed
+            view) to write the result to; by default a new one.
 
     Returns:
-        complex64 array of the same shape (zero where the input is zero).
+        complex64 array of the same shape (zero where the input is zero): ``out`` when
+        given.
     """
     spectrum = np.asarray(spectrum)
     if k == 1.0:
-        return spectrum.astype(np.complex64, copy=False)
+        if out is None:
+            return spectrum.astype(np.complex64, copy=False)
+        out[...] = spectrum
+        return out
     magnitude = np.abs(spectrum).astype(np.float32, copy=False)
     if fast and k == 0.5:
         with np.errstate(divide='ignore'):
-            root = np.sqrt(magnitude.astype(np.float64))
+            # the float64 root without a float64 copy of the magnitudes first
+            root = np.sqrt(magnitude, dtype=np.float64)
             scale = np.divide(1.0, root, out=root).astype(np.float32)
         scale[magnitude <= 1e-12] = 0.0
     else:
         scale = np.zeros_like(magnitude)
         np.power(magnitude, np.float32(k - 1.0), out=scale, where=magnitude > 1e-12)
-    return (spectrum * scale).astype(np.complex64, copy=False)
+    if out is None:
+        return (spectrum * scale).astype(np.complex64, copy=False)
+    return np.multiply(spectrum, scale, out=out)
 
 
 def scene_spectrum(roi: np.ndarray, fft_shape: tuple[int, int], k: float) -> np.ndarray:
@@ -59,19 +69,26 @@ def scene_spectrum(roi: np.ndarray, fft_shape: tuple[int, int], k: float) -> np.
     return kth_law(_half_spectrum(roi, fft_shape), k, fast=True)
 
 
-def scene_spectra(rois: Sequence[np.ndarray], fft_shape: tuple[int, int], k: float
-                  ) -> np.ndarray:
+def scene_spectra(rois: Sequence[np.ndarray], fft_shape: tuple[int, int], k: float,
+                  transposed: bool = False) -> np.ndarray:
     """:func:`scene_spectrum` of several ROIs for one FFT size, stacked (the same values).
 
     Args:
         rois: S (h, w) real arrays with h <= Ny and w <= Nx.
         fft_shape: (Ny, Nx).
         k: kth-law exponent.
+        transposed: return them in the layout of :func:`transposed_spectra` (written so
+            by the kth law: no copy).
 
     Returns:
-        (S, Ny, Nx // 2 + 1) complex64.
+        (S, Ny, Nx // 2 + 1) complex64, or (S, Nx // 2 + 1, Ny) with ``transposed``.
     """
-    return kth_law(np.stack([_half_spectrum(roi, fft_shape) for roi in rois]), k, fast=True)
+    spectra = np.stack([_half_spectrum(roi, fft_shape) for roi in rois])
+    if not transposed:
+        return kth_law(spectra, k, fast=True)
+    out = np.empty((len(spectra), spectra.shape[2], spectra.shape[1]), np.complex64)
+    kth_law(spectra, k, fast=True, out=np.swapaxes(out, -1, -2))
+    return out
 
 
 def _half_spectrum(roi: np.ndarray, fft_shape: tuple[int, int]) -> np.ndarray:
