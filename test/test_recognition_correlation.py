@@ -107,13 +107,13 @@ def test_peak_psr_per_plane_centres_equal_one_plane_at_a_time() -> None:
         for name in ('value', 'y', 'x', 'psr'):
             assert getattr(together, name)[index] == getattr(alone, name)[0], name
 
-@pytest.mark.parametrize('shape', [(64, 64), (54, 54), (45, 45)])
+@pytest.mark.parametrize('shape', [(64, 64), (54, 54), (45, 45), (20, 20)])
 def test_correlation_peaks_equal_peak_psr_of_the_planes(filter_50: np.ndarray,
                                                         shape: tuple[int, int]) -> None:
     """The classifier's peaks from the transposed products (the rows of the peak blocks
     only) are bitwise those of peak_psr on the full planes, for one centre shared by
     every plane and for a centre per plane (wrapping around index 0), with per-plane
-    search sizes."""
+    search sizes, and for blocks wider than a small plane (20 px)."""
     rng = np.random.default_rng(11)
     filters = np.conj(np.fft.rfft2(rng.standard_normal((3,) + shape), s=shape)).astype(
         np.complex64)

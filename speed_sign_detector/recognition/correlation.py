@@ -287,13 +287,41 @@ def correlation_peaks(product: np.ndarray, fft_shape: tuple[int, int],
         lines = product[np.arange(count)[:, None], :, rows]
     # (F, B, Nx) float32 rows of the planes, then their block's columns
     planes = np.fft.irfft(lines, n=fft_shape[1], axis=-1)
-    if cols.ndim == 1:
-        block = planes.take(cols, axis=2)
-    else:
-        side = cols.shape[1]
-        block = planes[np.arange(count)[:, None, None], np.arange(side)[None, :, None],
-                       cols[:, None, :]]
-    return _block_peaks(block, blocks, sidelobe_half, exclude_half)
+    return _block_peaks(_circular_columns(planes, cols), blocks, sidelobe_half, exclude_half)
+
+
+def _circular_columns(planes: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """``planes[p, i, cols[p, j]]`` for columns that run on circularly from their first,
+    ``cols[p, j] = (cols[p, 0] + j) % Nx``, as at most two slices per distinct first column
+    (a fancy index reads element by element).
+
+    Args:
+        planes: (F, B, Nx) array.
+        cols: (C,) columns of every plane, or (F, C) per plane.
+
+    Returns:
+        (F, B, C) C-contiguous array.
+    """
+    count, height, width = planes.shape
+    side = cols.shape[-1]
+    if side > width:  # the block is wider than the plane: columns repeat
+        if cols.ndim == 1:
+            return planes.take(cols, axis=2)
+        return planes[np.arange(count)[:, None, None], np.arange(height)[None, :, None],
+                      cols[:, None, :]]
+    out = np.empty((count, height, side), planes.dtype)
+    firsts = cols[..., 0]
+    for first in (np.unique(firsts) if cols.ndim > 1 else (int(firsts),)):
+        first = int(first)
+        head = min(side, width - first)
+        if cols.ndim == 1:
+            out[:, :, :head] = planes[:, :, first:first + head]
+            out[:, :, head:] = planes[:, :, :side - head]
+        else:
+            chosen = np.flatnonzero(firsts == first)
+            out[chosen, :, :head] = planes[chosen, :, first:first + head]
+            out[chosen, :, head:] = planes[chosen, :, :side - head]
+    return out
 
 
 def _block_peaks(block: np.ndarray, blocks: _PeakBlocks, sidelobe_half: int,
@@ -313,7 +341,7 @@ def _block_peaks(block: np.ndarray, blocks: _PeakBlocks, sidelobe_half: int,
         window[outside[:, :, None] | outside[:, None, :]] = -np.inf
         window = window.reshape(count, -1)
     best = window.argmax(axis=1)
-    peak_value = window.max(axis=1)
+    peak_value = window[np.arange(count), best]  # the maximum (read, not sought again)
     best_y, best_x = np.divmod(best, search_side)
     lobe_side = 2 * sidelobe_half + 1
     squares = np.ndarray((count, search_side, search_side, lobe_side, lobe_side), block.dtype,
