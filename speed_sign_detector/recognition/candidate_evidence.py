@@ -319,7 +319,7 @@ class EvidenceSearch:
             if all(chosen is group[0][2] for _, _, chosen in group):
                 # the same filters for every position: (positions x filters) products
                 scenes = np.stack([spectrum for spectrum, _, _ in spectra])[:, None]
-                product = (classification[group[0][2]] * scenes).reshape(
+                product = (_rows(classification, group[0][2]) * scenes).reshape(
                     (-1,) + classification.shape[1:])
             else:
                 product = classification[np.concatenate([c for _, _, c in group])]
@@ -431,6 +431,16 @@ def _roi(gray: np.ndarray, x_px: float, y_px: float, size: int, scale: float = 1
     if source == size:
         return window, 1.0
     return cv2.resize(window, (size, size), interpolation=cv2.INTER_AREA), size / source
+
+
+def _rows(array: np.ndarray, indices: np.ndarray) -> np.ndarray:
+    """``array[indices]``: a strided view where the indices step evenly (every class's
+    upright filter is every third), else a copy."""
+    if indices.size > 1:
+        step = int(indices[1] - indices[0])
+        if step > 0 and np.array_equal(np.diff(indices), np.full(indices.size - 1, step)):
+            return array[int(indices[0]):int(indices[-1]) + 1:step]
+    return array[indices]
 
 
 @functools.lru_cache(maxsize=256)  # the centre is whole or half a pixel: few windows
