@@ -80,3 +80,29 @@ def test_painted_signs_are_not_inverted(classifier: Classifier) -> None:
         evidence = classifier.crop_evidence(crop)
         assert not getattr(evidence, 'inverted', False)
         assert classifier.classify_crop(crop).label == value
+
+
+def test_levels_equal_numpy_inside_and_across_the_border() -> None:
+    """The levels are numpy's median and means of the window's pixels, whether the window
+    lies inside the image (read by slicing) or beyond its border (border replicated)."""
+    from speed_sign_detector.recognition.sign_polarity import (
+        WINDOW_PX,
+        _masks,
+        _median,
+        _window,
+    )
+    rng = np.random.default_rng(5)
+    caps, box, ring = _masks(WINDOW_PX)
+    image = rng.integers(0, 256, (90, 120), dtype=np.uint8)
+    padded = np.pad(image, 100, mode='edge')
+    for x_px, y_px, radius_px in ((60.0, 45.0, 30.0), (3.0, 80.0, 20.0), (118.5, 2.0, 33.0),
+                                  (60.0, 45.0, 8.0)):
+        window = _window(image, x_px, y_px, radius_px).ravel()
+        # the same window of the image with its border replicated beyond any reach
+        assert np.array_equal(window, _window(padded, x_px + 100, y_px + 100, radius_px).ravel())
+        assert polarity_measures(image, x_px, y_px, radius_px) == (
+            float(np.median(window[caps])), float(window[box].mean()),
+            float(window[ring].mean()))
+    for count in (1, 2, 35, 36):
+        values = rng.uniform(0, 255, count).astype(np.float32)
+        assert _median(values) == float(np.median(values))
