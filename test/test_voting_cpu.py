@@ -20,7 +20,6 @@ from speed_sign_detector.detection.candidates import (
     score_normaliser,
     select_candidates,
 )
-from speed_sign_detector.detection import voting_cpu
 from speed_sign_detector.detection.candidates_cpu import (
     packed_block_maxima,
     select_packed_candidates,
@@ -243,22 +242,6 @@ def test_voting_on_two_threads_equals_one_thread() -> None:
         helped.close()
         helped.close()   # idempotent
     assert helped.packed_votes(edges, (320, 240))[0].shape == (240, 320)   # on one thread
-
-
-def test_unbuffered_and_bincount_voting_give_the_same_sums(
-        monkeypatch: pytest.MonkeyPatch) -> None:
-    """``np.add.at`` straight into the image (numpy >= 1.25) and ``np.bincount`` per chunk
-    (older numpy) add the same whole numbers: the same packed sums, bit for bit."""
-    config = DetectorConfig()
-    gray = synthetic_scene()
-    edges = compute_edges_fast(gray, config)
-    voter = CPUVoter(config, threads=1)
-    monkeypatch.setattr(voting_cpu, 'UNBUFFERED_ADD', True)
-    unbuffered = voter.packed_votes(edges, (320, 240))
-    monkeypatch.setattr(voting_cpu, 'UNBUFFERED_ADD', False)
-    for one, two in zip(unbuffered, voter.packed_votes(edges, (320, 240)), strict=True):
-        assert one.max() > 0.0
-        np.testing.assert_array_equal(one, two)
 
 
 def test_auto_keeps_gl_on_a_hardware_renderer_without_a_trial(

@@ -15,7 +15,7 @@ so each band keeps one *stencil* per (phase, direction): the vote-image offsets 
 reference's rasterization rule (:func:`voting_numpy._rasterize`) gives, and their
 ``(profile / u, profile)``, both rounded to fixed point and packed into one float64
 integer (count in the low bits), whose sums are exact whatever the order. Voting is then
-a table look-up per edge, one addition of its position and one ``np.add.at`` per chunk
+a table look-up per edge, one addition of its position and one ``np.bincount`` per chunk
 of edges. Chunks of :data:`EDGES_PER_CHUNK` row-ordered edges keep the temporaries and the
 rows they touch in the CPU caches (4x faster than one pass over a whole frame).
 
@@ -28,7 +28,7 @@ reference's above 0.9997 and their totals agree to 0.2 %, with the same candidat
 ``test_voting_cpu.py`` checks them against the reference.
 
 A band that votes toward both sides of its edges keeps both directions' stencils side
-by side in one table row, so that each chunk costs one look-up and one ``np.add.at``.
+by side in one table row, so that each chunk costs one look-up and one ``np.bincount``.
 On hosts of more than 2 cores the bands are split over two threads
 (:data:`VOTING_THREADS`).
 """
@@ -58,11 +58,7 @@ from speed_sign_detector.detection.voting_numpy import (
 DIRECTION_BINS = 1024
 """Gradient directions a stencil is kept for (a power of two; 2 pi / 1024 = 0.35 deg)."""
 EDGES_PER_CHUNK = 4096
-"""Edge pixels voted per ``np.add.at`` (their stencils' temporaries stay in the cache)."""
-UNBUFFERED_ADD = tuple(int(part) for part in np.__version__.split('.')[:2]) >= (1, 25)
-"""Whether ``np.add.at`` has its fast path (numpy 1.25 and later): the votes are added
-straight into the vote image, 10-20 % faster than ``np.bincount`` of each chunk (and its
-addition into the image); older numpy takes the ``np.bincount`` way."""
+"""Edge pixels voted per ``np.bincount`` (their stencils' temporaries stay in the cache)."""
 VOTING_THREADS = 2 if (os.cpu_count() or 1) > 2 else 1
 """Threads that vote (bands split between them; numpy's take and bincount release the
 GIL). One on a host of 2 cores or fewer: there the pipeline recognizes the previous frame
@@ -324,20 +320,13 @@ def _accumulate(sums: np.ndarray, base: np.ndarray, keys: np.ndarray,
     """Add the stencils ``keys`` at flat pixels ``base`` (row-ordered) into ``sums``.
 
     ``reach_flat`` bounds how far before its base pixel a stencil reaches (flat index).
-    The packed votes are whole numbers, so their sums are exact in any order: with
-    :data:`UNBUFFERED_ADD` they go straight into ``sums`` (``np.add.at``), else through
-    ``np.bincount`` of each chunk's span of pixels.
     """
     for start in range(0, base.shape[0], EDGES_PER_CHUNK):
         chunk_base = base[start:start + EDGES_PER_CHUNK]
         chunk_keys = keys[start:start + EDGES_PER_CHUNK]
-        pixels = np.take(offsets, chunk_keys, axis=0)
-        votes = np.take(packed_votes, chunk_keys, axis=0)
-        if UNBUFFERED_ADD:
-            pixels += chunk_base[:, None]
-            np.add.at(sums, pixels.ravel(), votes.ravel())
-            continue
         low = int(chunk_base.min()) - reach_flat
+        pixels = np.take(offsets, chunk_keys, axis=0)
         pixels += (chunk_base - low)[:, None]
+        votes = np.take(packed_votes, chunk_keys, axis=0)
         part = np.bincount(pixels.ravel(), votes.ravel())
         sums[low:low + part.shape[0]] += part
