@@ -105,13 +105,9 @@ def _support(pixels: np.ndarray, magnitude: np.ndarray, gx: np.ndarray, gy: np.n
         unit_x[pixels] = gx[pixels] / magnitude[pixels]
         unit_y[pixels] = gy[pixels] / magnitude[pixels]
     own_x, own_y = unit_x[pixels], unit_y[pixels]
-    # all 8 neighbours at once, (8, E): long rows, few calls
-    neighbours = np.array([-width - 1, -width, -width + 1, -1, 1, width - 1, width,
-                           width + 1])[:, None] + pixels
-    # a non-edge neighbour has the unit vector (0, 0): its cosine 0 never counts
-    cosine = np.take(unit_x, neighbours)
-    cosine *= own_x
-    other = np.take(unit_y, neighbours)
-    other *= own_y
-    cosine += other
-    return np.count_nonzero(cosine >= _COS_SUPPORT, axis=0)
+    count = np.zeros(pixels.shape, np.int32)
+    for offset in (-width - 1, -width, -width + 1, -1, 1, width - 1, width, width + 1):
+        neighbours = pixels + offset
+        # a non-edge neighbour has the unit vector (0, 0): its cosine 0 never counts
+        count += (own_x * unit_x[neighbours] + own_y * unit_y[neighbours]) >= _COS_SUPPORT
+    return count
