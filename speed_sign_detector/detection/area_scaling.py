@@ -10,7 +10,9 @@ whole-number weights (in units of ``1 / p`` source pixel, ``q`` per target pixel
 :func:`scale_area` adds the weighted rows of each group as uint16 integers, transposes,
 does the same with the columns, and divides by ``q_rows x q_cols`` with OpenCV's
 rounding (``cv2.convertScaleAbs``): the same pixels as ``cv2.resize(..., INTER_AREA)``,
-bit for bit, in about a third of its time. Other sizes go to ``cv2.resize``.
+bit for bit, in about 60 % of its time (1280x720 -> 960x540 within the detector, frames
+interleaved with the old way, on 2 cores loaded by other jobs: 2.3 against 4.0 ms).
+Other sizes go to ``cv2.resize``.
 """
 from __future__ import annotations
 
