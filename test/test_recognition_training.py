@@ -34,6 +34,7 @@ from speed_sign_detector.recognition.crop_framing import (
 )
 from speed_sign_detector.recognition.filter_banks import bank_radii, build_banks
 from speed_sign_detector.recognition.second_opinion import (
+    COMPOSITE_ONLY_ANSWER_LEAD,
     COMPOSITE_ONLY_OVERRULE_LEAD,
     END_OF_LIMIT_LABEL,
     RENDERED_ONLY_MAX_GAP,
@@ -523,11 +524,30 @@ def test_overruling_a_value_known_from_composites_only_needs_a_clear_lead() -> N
     # between two values with real crops the usual overrule lead holds
     assert opinion.choose(np.asarray([-0.8, 0.7, -1.0, -1.0]), ['20', '100'], 2, 0.2,
                           1.0) == '100'
-    # agreeing with the correlation needs no more than min_lead
-    assert opinion.choose(np.asarray([-1.0, -0.8, 0.7, -1.0]), ['120', '100'], 2, 0.2,
+    # agreeing with the correlation on it needs COMPOSITE_ONLY_ANSWER_LEAD (next test)
+    assert opinion.choose(np.asarray([-1.0, -0.9, 0.9, -1.0]), ['120', '100'], 2, 0.2,
                           1.0) == '120'
     # banks that do not record their crop labels treat every real label as one
     assert _opinion(labels, labels).choose(reads_100, ['120', '100'], 2, 0.2, 1.0) == '100'
+
+
+def test_answering_a_value_known_from_composites_only_needs_a_clear_lead() -> None:
+    """A limit the model knows from composites only (no real crop of it) is answered only
+    with a lead of COMPOSITE_ONLY_ANSWER_LEAD, even where the correlation ranks it first:
+    a real 100 read as the composite 10 by both is withheld."""
+    labels = ('10', '30', '100', 'other_sign')
+    opinion = dataclasses.replace(_opinion(labels, labels),
+                                  crop_labels=('30', '100', 'other_sign'))
+    assert 1.5 < COMPOSITE_ONLY_ANSWER_LEAD < 2.0
+    reads_10 = np.asarray([0.75, -0.91, -0.95, -1.0])             # lead 1.66
+    assert opinion.choose(reads_10, ['10', '30'], 3, 0.2, 1.0) is None
+    sure_10 = np.asarray([0.9, -0.95, -0.95, -1.0])               # lead 1.85
+    assert opinion.choose(sure_10, ['10', '30'], 3, 0.2, 1.0) == '10'
+    # a value with real crops needs no more than min_lead
+    reads_30 = np.asarray([-0.9, 0.2, -0.3, -1.0])                # lead 0.5
+    assert opinion.choose(reads_30, ['30', '10'], 3, 0.2, 1.0) == '30'
+    # banks that do not record their crop labels treat every real label as one
+    assert _opinion(labels, labels).choose(reads_10, ['10', '30'], 3, 0.2, 1.0) == '10'
 
 
 def test_second_opinion_never_turns_a_limit_into_an_end_of_limit() -> None:
