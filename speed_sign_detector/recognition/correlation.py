@@ -6,6 +6,14 @@ shape ``(..., Ny, Nx // 2 + 1)`` complex64 (scene spectra are computed with
 :func:`cv2.dft`: the same to float32 rounding). The correlation plane ``c[ty, tx]`` of a
 scene with a filter is the filter's match with its top-left corner at scene pixel
 ``(ty, tx)`` (circular).
+
+The classifier correlates through :func:`correlation_peaks`, which reads products in the
+transposed layout ``(..., Nx // 2 + 1, Ny)`` (:func:`transposed_spectra`: the first pass
+of the inverse FFT then runs along contiguous memory) and transforms only the plane rows
+that the peak search reads; its peaks and PSRs are bitwise those of :func:`peak_psr` on
+:func:`inverse_planes`' planes (the same one-dimensional transforms of the same numbers).
+On the classifier's frames these steps took 27 % (inverse FFTs), 14 % (peaks) and 8 %
+(scene DFTs) of its time, 2-core development machine, 2026-11-27.
 """
 from __future__ import annotations
 
