@@ -3,13 +3,11 @@
 The same maths as :func:`speed_sign_detector.detection.gradients.extract_edges` (the
 reference, whose conventions this module follows), arranged for speed on a CPU:
 
-- the contrast table, the pyramid's 2x2 box averages and the 3x3 Sobel are OpenCV calls
-  (vectorised, on every core), the magnitude is numpy's (rounded as the reference's);
+- the contrast table, the pyramid's 2x2 box averages, the 3x3 Sobel and the magnitude are
+  OpenCV calls (vectorised, on every core);
 - the non-maximum suppression along the gradient and the neighbour-support test look at
   the pixels that can still be edges only (those above the threshold, then the ridge
-  pixels), by flat index, instead of at every pixel for every direction;
-- a level is taken in strips of :data:`STRIP_ROWS` rows (with a halo), so that the
-  gradient images the sparse tests read are still in the CPU caches.
+  pixels), by flat index, instead of at every pixel for every direction.
 
 Float rounding may differ from the reference in the last bit (OpenCV sums in another
 order), so a pixel whose magnitude equals the threshold or its neighbour's to the last
@@ -47,76 +45,30 @@ def build_pyramid_fast(gray: np.ndarray, levels: int, lookup: np.ndarray
     return pyramid
 
 
-STRIP_ROWS = 64
-"""Rows of a level extracted at a time: the strip's gradient images (with their halo)
-stay in the CPU caches between the Sobel pass and the neighbour tests (on 2 loaded cores,
-a 640x480 level took 8 ms of CPU time in strips of 64 rows against 12 ms whole, frames
-interleaved)."""
-_HALO_ROWS = 3
-"""Rows above and below a strip whose Sobel must be right: the support test reads the
-ridge test of the rows next to the strip, which reads the magnitude one row further,
-which needs the image one row further still."""
-
-
 def extract_edges_fast(image: np.ndarray, level: int, threshold: float, thin: bool,
                        min_support: int = 0) -> EdgeList:
     """Edge pixels of one pyramid level (float32 (H, W) gray image), row-ordered as the
-    reference's :func:`gradients.extract_edges` lists them.
-
-    The level is taken in strips of :data:`STRIP_ROWS` rows, each with
-    :data:`_HALO_ROWS` rows of the image above and below: every value a strip's tests
-    read is computed from the same 3x3 neighbourhood as on the whole level, so the edges
-    are those of the whole level.
-    """
-    height, width = image.shape
-    pixels, gx, gy = [], [], []
-    for top in range(0, height, STRIP_ROWS):
-        bottom = min(height, top + STRIP_ROWS)
-        first = max(0, top - _HALO_ROWS)
-        strip_pixels, strip_gx, strip_gy = _strip_edges(
-            image[first:min(height, bottom + _HALO_ROWS)], top - first, bottom - first,
-            threshold, thin, min_support)
-        pixels.append(strip_pixels + first * width)
-        gx.append(strip_gx)
-        gy.append(strip_gy)
-    rows, cols = np.divmod(np.concatenate(pixels), width)
-    return EdgeList(cols.astype(np.float32), rows.astype(np.float32), np.concatenate(gx),
-                    np.concatenate(gy), level, width, height)
-
-
-def _strip_edges(image: np.ndarray, top: int, bottom: int, threshold: float, thin: bool,
-                 min_support: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Edge pixels in rows ``top`` to ``bottom`` (exclusive) of a strip of a level
-    (float32 (h, W), the strip's rows and its halo): their flat indices in the strip,
-    row-ordered, and their ``gx``, ``gy``.
-
-    The strip's first and last rows are the level's border rows or halo rows no test
-    reads (the reference has no gradient on the border, so both are zeroed).
-    """
+    reference's :func:`gradients.extract_edges` lists them."""
     height, width = image.shape
     gx = cv2.Sobel(image, cv2.CV_32F, 1, 0, ksize=3)
     gy = cv2.Sobel(image, cv2.CV_32F, 0, 1, ksize=3)
-    # as the reference rounds it (cv2.magnitude's last bit depends on where the row
-    # starts in its vector lanes, so strips would round some pixels otherwise)
-    magnitude = gx * gx
-    magnitude += gy * gy
-    np.sqrt(magnitude, out=magnitude)
+    magnitude = cv2.magnitude(gx, gy)
     for array in (gx, gy, magnitude):  # the reference has no gradient on the border
         array[0, :] = array[-1, :] = 0.0
         array[:, 0] = array[:, -1] = 0.0
-    # the rows whose ridge test the support test of rows top..bottom reads
-    tested_top, tested_bottom = max(1, top - 1), min(height - 1, bottom + 1)
-    keep = magnitude[tested_top:tested_bottom] >= np.float32(threshold)
+    keep = magnitude >= np.float32(threshold)
+    keep[0, :] = keep[-1, :] = False
     keep[:, 0] = keep[:, -1] = False
     flat_gx, flat_gy, flat_magnitude = gx.ravel(), gy.ravel(), magnitude.ravel()
-    pixels = np.flatnonzero(keep) + tested_top * width
+    pixels = np.flatnonzero(keep)
     if thin and pixels.size:
         pixels = pixels[_is_ridge(pixels, flat_magnitude, flat_gx, flat_gy, width)]
     if min_support > 0 and pixels.size:
         pixels = pixels[_support(pixels, flat_magnitude, flat_gx, flat_gy, width)
                         >= min_support]
-    pixels = pixels[(pixels >= top * width) & (pixels < bottom * width)]
-    return pixels, flat_gx[pixels], flat_gy[pixels]
+    rows, cols = np.divmod(pixels, width)
+    return EdgeList(cols.astype(np.float32), rows.astype(np.float32), flat_gx[pixels],
+                    flat_gy[pixels], level, width, height)
 
 
 def compute_edges_fast(gray: np.ndarray, config: DetectorConfig) -> list[EdgeList]:
