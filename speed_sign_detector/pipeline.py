@@ -333,11 +333,14 @@ class Pipeline:
 def _build_classifiers(config: PipelineConfig
                        ) -> tuple[Classifier, ...] | tuple[ClassifierProcess, ...]:
     """The classifiers ``config`` asks for: none, one in this process, or
-    ``classifier_workers`` in worker processes of their own."""
+    ``classifier_workers`` in worker processes of their own (0, auto, counts as 1 here:
+    the node sizes it to the host before, with :mod:`~speed_sign_detector.
+    classifier_placement`)."""
     if not config.classify:
         return ()
     if config.classifier_process:
-        return start_classifier_processes(config.classifier, config.classifier_workers)
+        return start_classifier_processes(config.classifier,
+                                          max(1, config.classifier_workers))
     return (Classifier(config.classifier),)
 
 

@@ -19,6 +19,7 @@ import pytest
 import rclpy
 import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rcl_interfaces.msg import Log
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
@@ -36,6 +37,10 @@ from scene_helpers import approach_frames, textured_background
 from sensor_msgs.msg import CompressedImage, Image, PointCloud2
 from std_msgs.msg import Header, UInt16
 
+from speed_sign_detector.classifier_placement import (
+    choose_classifier_placement,
+    usable_cpu_count,
+)
 from speed_sign_detector.config import (
     DetectorConfig,
     node_option_specs,
@@ -477,22 +482,26 @@ def test_classifier_process_reads_signs_in_a_worker_process(ros: tuple) -> None:
     """``classifier_process`` set at run time: the classifier moves to a worker process,
     which reads the approach's limit; with ``classifier_workers`` 2, two workers read
     the next approach (a change that would leave two workers without processes is
-    rejected with the reason); set back, the classifier returns to the node's process."""
+    rejected with the reason); set back, the classifier returns to the node's process.
+    ``classifier_workers`` 1 first, so that the counts do not depend on the host's size."""
     node, probe = ros
-    assert not child_processes(CLASSIFIER_WORKER)
-    [result] = call_set_parameters(probe, parameter('classifier_process', True))
+    [one, result] = call_set_parameters(probe, parameter('classifier_workers', 1),
+                                        parameter('classifier_process', True))
+    assert one.successful, one.reason
     assert result.successful, result.reason
     try:
         nearest = run_approach(probe, '70', compressed=False, seed=4)
         assert len(child_processes(CLASSIFIER_WORKER)) == 1
-        latest_status(probe, lambda v: v['classifier'] == '1 worker process')
+        latest_status(probe, lambda v: v['classifier']
+                      == '1 worker process (classifier_workers 1)')
         assert any(point['limit_kmh'] == 70 for point in nearest)
         wait_for(lambda: probe.limits and probe.limits[-1] == 70, 'speed_limit 70')
         [result] = call_set_parameters(probe, parameter('classifier_workers', 2))
         assert result.successful, result.reason
         nearest = run_approach(probe, '50', compressed=False, seed=5)
         assert len(child_processes(CLASSIFIER_WORKER)) == 2
-        latest_status(probe, lambda v: v['classifier'] == '2 worker processes')
+        latest_status(probe, lambda v: v['classifier']
+                      == '2 worker processes (classifier_workers 2)')
         assert any(point['limit_kmh'] == 50 for point in nearest)
         wait_for(lambda: probe.limits and probe.limits[-1] == 50, 'speed_limit 50')
         [refused] = call_set_parameters(probe, parameter('classifier_process', False))
@@ -513,8 +522,45 @@ def test_classifier_process_reads_signs_in_a_worker_process(ros: tuple) -> None:
         return next((kv.value for array in reversed(arrays) for status in array.status
                      for kv in status.values if kv.key == 'classifier'), None)
 
-    wait_for(lambda: newest_classifier_location() == 'in this process',
+    wait_for(lambda: newest_classifier_location() == 'in this process (classifier_workers 1)',
              'the diagnostics to say the classifier is back in the node process')
+    [auto] = call_set_parameters(probe, parameter('classifier_workers', 0))  # the default
+    assert auto.successful, auto.reason
+
+
+def test_classifier_workers_default_to_the_host_size(ros: tuple) -> None:
+    """``classifier_workers`` 0 (the default, auto) places the classifier as the CPUs
+    this process may use allow: the start-up log (on /rosout, kept for late
+    subscribers) and /diagnostics say so; on a host of up to 4 CPUs (this 2-core one) it
+    stays in the node's process, on a thread. A negative count is refused with a reason."""
+    node, probe = ros
+    assert node.get_parameter('classifier_workers').value == 0
+    overlap = node.get_parameter('overlap_stages').value
+    placement = choose_classifier_placement(usable_cpu_count(), 0, False, overlap)
+    expected_location = (
+        f'{placement.workers} worker process{"es" if placement.workers > 1 else ""}'
+        if placement.in_worker_processes else 'in this process')
+    expected = f'{expected_location} (auto for {usable_cpu_count()} CPUs' + (
+        '' if overlap else ', stages not overlapped') + ')'
+    if usable_cpu_count() <= 4:
+        assert expected.startswith('in this process (auto for ')
+    send_and_wait(probe, image_message(textured_background(11), Header(), image_class=Image),
+                  probe.image_pub)
+    latest_status(probe, lambda v: v['classifier'] == expected)
+
+    log_lines: list[str] = []
+    probe.create_subscription(Log, '/rosout', lambda msg: log_lines.append(msg.msg)
+                              if msg.name == NODE_NAME else None, QoSProfile(
+                                  depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+                                  durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    wait_for(lambda: placement.describe() in list(log_lines),
+             f'the log line {placement.describe()!r} on /rosout')
+
+    [refused] = call_set_parameters(probe, parameter('classifier_workers', -1))
+    assert not refused.successful
+    assert refused.reason == ('Parameter classifier_workers out of range. Min: 0, Max: 16, '
+                              'value: -1'), refused.reason
+    assert node.get_parameter('classifier_workers').value == 0
 
 
 

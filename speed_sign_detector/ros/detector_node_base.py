@@ -18,7 +18,9 @@ Threads:
       each detected frame while the worker detects the next one, and publishes the
       results (:class:`~speed_sign_detector.overlapped_pipeline.OverlappedPipeline`;
       with ``classifier_workers`` N, N recognition threads classify and take turns to
-      track and publish, frames in order); without it the worker does that too.
+      track and publish, frames in order; 0, the default, sizes N to the host:
+      :mod:`~speed_sign_detector.classifier_placement`); without it the worker does that
+      too.
 
 Worker threads are stopped (:meth:`DetectorNodeBase.stop_pipeline`) before the node is
 destroyed and before the ROS context shuts down, so no thread publishes through a dead
@@ -49,6 +51,7 @@ from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import CompressedImage, Image, PointCloud2, PointField
 from std_msgs.msg import Header, UInt16
 
+from speed_sign_detector.classifier_placement import ClassifierPlacement, place_classifier
 from speed_sign_detector.config import (
     NodeOptions,
     PipelineConfig,
@@ -141,6 +144,7 @@ class DetectorNodeBase:
         self._fallback_reason: str | None = None
         self._backend_choice = ''
         self._classifier_location = 'off'
+        self._classifier_placement: ClassifierPlacement | None = None
         self._last_tick = (time.monotonic(), 0)
         self._published_limit_kmh: int | None = None
         self._worker_error: BaseException | None = None
@@ -476,7 +480,10 @@ class DetectorNodeBase:
     def _run_worker(self, ready: threading.Event) -> None:
         """Own the pipeline: build it, process the newest frame until stopped, close it."""
         try:
-            pipeline = Pipeline(self._pipeline_config)
+            config, placement = place_classifier(self._pipeline_config,
+                                                 self._options.overlap_stages)
+            pipeline = Pipeline(config)
+            self._note_classifier_placement(placement)
             self._note_backend(pipeline)
             stages = OverlappedPipeline(pipeline, self._finish_frame, self._recognition_failed,
                                         overlap=self._options.overlap_stages)
@@ -520,11 +527,13 @@ class DetectorNodeBase:
                 self._drain_requests = []
 
     def _reconfigure(self, pipeline: Pipeline, config: PipelineConfig) -> None:
+        placed, placement = place_classifier(config, self._options.overlap_stages)
         try:
-            pipeline.reconfigure(config)
+            pipeline.reconfigure(placed)
         except Exception as err:  # noqa: BLE001 - the node keeps its previous stages
             self._record_error(f'cannot apply the new parameters: {err}')
             return
+        self._note_classifier_placement(placement)
         self._note_backend(pipeline)
         self.get_logger().info(f'parameters applied (backend {self._backend}, '
                                f'{self._vote_method} voting)')
@@ -535,7 +544,17 @@ class DetectorNodeBase:
         self._vote_method = pipeline.vote_method
         self._fallback_reason = pipeline.fallback_reason
         self._backend_choice = pipeline.backend_choice
-        self._classifier_location = pipeline.classifier_location
+        location, placement = pipeline.classifier_location, self._classifier_placement
+        self._classifier_location = (f'{location} ({placement.reason})'
+                                     if placement is not None and location != 'off'
+                                     else location)
+
+    def _note_classifier_placement(self, placement: ClassifierPlacement) -> None:
+        """Keep where the classifier runs; log it at start and when it changes."""
+        if placement != self._classifier_placement:
+            self.get_logger().info(placement.describe() + (
+                '' if placement.automatic else f'; {placement.cpus} usable CPUs'))
+        self._classifier_placement = placement
 
     def _process(self, stages: OverlappedPipeline, frame: ReceivedFrame) -> None:
         """Convert and detect one frame (a bad one is counted and logged); its recognition
