@@ -180,7 +180,8 @@ def _soak_command(soak: Section) -> str:
 
 
 def provenance_lines(run: LongRun, figures: Section) -> list[str]:
-    """The command that made ``figures``, how long it took, and the host."""
+    """The command that made ``figures``, how long it took, the file's ``'note'`` (for
+    figures merged from several runs: which figure comes from which), and the host."""
     recorded = figures.get('recorded_run')
     source = f"; figures from `{figures['source_file']}`" if figures.get('source_file') else ''
     if isinstance(recorded, Mapping):
@@ -188,8 +189,9 @@ def provenance_lines(run: LongRun, figures: Section) -> list[str]:
         took = f", {_duration(recorded['elapsed_s'])}" if 'elapsed_s' in recorded else ''
         command = ' '.join(recorded['command'])
         what_make_runs = f' (`{run.make_target}`)' if command == run.command else ''
+        note = [str(figures['note'])] if figures.get('note') else []
         return [f'Command: `{command}`{what_make_runs}{took}'
-                f"{source}.",
+                f"{source}.", *note,
                 _host(_machine_line(machine), machine, recorded)]
     if run.key == 'soak' and 'host' in figures:
         machine = figures.get('machine') or {}

@@ -209,6 +209,21 @@ def test_holdout_per_value_rows_and_mean(markdown: ModuleType) -> None:
     assert '--leave-one-value-out --json' in part and 'Host: not recorded.' in part
 
 
+def test_a_note_says_which_run_each_figure_comes_from(markdown: ModuleType) -> None:
+    """Figures merged from two runs carry a note, printed under the command."""
+    merged = {**holdout_json(), 'note': 'Values 30 and 60 come from an earlier full run.',
+              'recorded_run': _recorded(['speed_sign_train', 'validate', 'gtsrb-dev',
+                                         '--leave-one-value-out', '--values', '120',
+                                         '--json'])}
+    part = sections(markdown.render_results_markdown(
+        with_long_runs(value_holdout=merged)))[HOLDOUT_HEADING]
+    lines = part.splitlines()
+    command = next(i for i, line in enumerate(lines) if line.startswith('Command:'))
+    assert '--values 120' in lines[command]
+    assert lines[command + 1] == 'Values 30 and 60 come from an earlier full run.'
+    assert lines[command + 2].startswith('Host:')
+
+
 def test_designs_rows_and_the_wrong_number(markdown: ModuleType) -> None:
     text = markdown.render_results_markdown(with_long_runs(sign_designs=designs_json()))
     part = sections(text)['Rendered designs']
