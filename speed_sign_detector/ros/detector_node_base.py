@@ -72,6 +72,7 @@ from speed_sign_detector.ros.frame_statistics import (
     describe_qos,
     percentiles_ms,
 )
+from speed_sign_detector.ros.input_warnings import no_image_warning, transport_loss_warning
 from speed_sign_detector.ros.messages import (
     DiagnosticsSnapshot,
     candidates_message,
@@ -91,17 +92,6 @@ IMAGE_QOS = qos_profile_sensor_data
 TRANSPORT_LOSS_LOG_PERIOD_S = 10.0
 #: Seconds the deactivation waits for frames in flight to be published.
 DRAIN_TIMEOUT_S = 30.0
-#: What a user does about frames lost in transport (logged and in the diagnostics).
-TRANSPORT_LOSS_FIX = (
-    'Raw images of ~1 MB are lost whole by best-effort DDS with Fast DDS defaults; export '
-    'FASTRTPS_DEFAULT_PROFILES_FILE=$(ros2 pkg prefix speed_sign_detector)/share/'
-    'speed_sign_detector/config/fastdds_large_images.xml for the camera driver (or '
-    '`ros2 bag play`) AND this node, or subscribe to image/compressed.')
-#: The same for compressed images, which are small enough for Fast DDS's defaults.
-COMPRESSED_LOSS_CAUSE = (
-    'Compressed images are small, so the usual cause is this node starved of CPU (its '
-    'subscription queue, keep last 5, overflows: give it a core, or a deeper queue with '
-    'qos_overrides.<topic>.subscription.depth) or a lossy network between the hosts.')
 
 
 class DetectorNodeBase:
@@ -438,15 +428,9 @@ class DetectorNodeBase:
         with self._stats.lock:
             lossy = [topic for topic, lost in
                      self._stats.transport_loss.lost_by_topic().items() if lost]
-        raw_lost = any(not topic.endswith('compressed') for topic in lossy)
-        period = total.frame_period_s
-        timing = (f' (gaps in the header stamps against the source\'s {period * 1e3:.1f} ms '
-                  f'frame period)' if period else '')
-        self.get_logger().warn(
-            f'frames are lost before they reach this node on {", ".join(lossy)}: '
-            f'{100 * recent_share:.0f} % recently, {total.frames_lost} of '
-            f'{total.frames_received + total.frames_lost} since start{timing}. '
-            + (TRANSPORT_LOSS_FIX if raw_lost else COMPRESSED_LOSS_CAUSE))
+        self.get_logger().warn(transport_loss_warning(
+            lossy, recent_share, total.frames_lost, total.frames_received,
+            total.frame_period_s))
 
     def _warn_if_no_images(self) -> None:
         if self._image_sub is None:
@@ -467,13 +451,9 @@ class DetectorNodeBase:
                 + ''.join(f' [{info.node_name}: '
                           f'{describe_qos(info.qos_profile, with_history=False)}]'
                           for info in infos))
-        self.get_logger().warn(
-            f'no image received for {silent_s:.0f} s on {self._image_sub.topic_name} '
-            f'(sensor_msgs/Image) or {self._compressed_sub.topic_name} '
-            f'(sensor_msgs/CompressedImage). This node subscribes with QoS '
-            f'{describe_qos(self._image_sub.qos_profile)} (sensor data); a publisher must '
-            f'offer compatible QoS, and the topic must be remapped to the camera '
-            f'(e.g. -r image:=/camera/image_raw). Seen: {"; ".join(publishers)}')
+        self.get_logger().warn(no_image_warning(
+            silent_s, self._image_sub.topic_name, self._compressed_sub.topic_name,
+            describe_qos(self._image_sub.qos_profile), publishers))
 
     # ------------------------------------------------------------------ worker thread
 
