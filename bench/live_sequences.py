@@ -54,7 +54,7 @@ from std_msgs.msg import UInt16
 from speed_sign_detector.bag_io import COMPRESSED_IMAGE_MSGTYPE, BagReader, header_stamp_ns
 from speed_sign_detector.errors import SpeedSignError
 from speed_sign_detector.ros.messages import pointcloud_to_array
-from speed_sign_detector.tools.eval_bag import DEFAULT_GRACE_S, LimitEvent, score_drive
+from speed_sign_detector.tools.bag_grading import DEFAULT_GRACE_S, LimitEvent, score_drive
 from speed_sign_detector.truth import group_tracks, read_truth
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]

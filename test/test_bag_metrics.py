@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import pytest
 
-from speed_sign_detector.tools.eval_bag import (
+from speed_sign_detector.tools.bag_grading import (
     DRIVE_COUNT_KEYS,
     EARLY_RECOGNITION_S,
     LimitEvent,

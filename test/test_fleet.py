@@ -24,7 +24,7 @@ from speed_sign_detector.config import PipelineConfig, load_yaml  # noqa: E402
 from speed_sign_detector.synthetic import DriveConfig, SyntheticDrive  # noqa: E402
 from speed_sign_detector.tools import eval as eval_tool  # noqa: E402
 from speed_sign_detector.tools import fleet  # noqa: E402
-from speed_sign_detector.tools.eval_bag import DRIVE_COUNT_KEYS  # noqa: E402
+from speed_sign_detector.tools.bag_grading import DRIVE_COUNT_KEYS  # noqa: E402
 from speed_sign_detector.tools.fleet_jobs import (  # noqa: E402
     BagJob,
     EvaluationSettings,

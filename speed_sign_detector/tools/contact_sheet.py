@@ -69,14 +69,14 @@ MOST_ZOOMS = 4
 
 
 class RecognitionEvent(Protocol):
-    """A limit the tracker newly recognized (``eval_bag.LimitEvent``)."""
+    """A limit the tracker newly recognized (``bag_grading.LimitEvent``)."""
 
     limit_kmh: int   # 0: end of limit
     track_id: int    # the pipeline's track, -1 when unknown
 
 
 class SignResult(Protocol):
-    """What became of a truth sign over the drive (``eval_bag.SignOutcome``)."""
+    """What became of a truth sign over the drive (``bag_grading.SignOutcome``)."""
 
     track_id: int
     recognized: bool

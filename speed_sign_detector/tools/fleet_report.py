@@ -25,7 +25,7 @@ last stdout line and writes to ``OUT/fleet.json``:
     second, and the seconds it spent building its pipeline.
 ``signs``, ``recognized``, ``recall``, ``wrong_limits``, ... (as ``eval bag``), with
     ``bags_with_truth``: the per-sign metrics of the done bags that have truth, their
-    counts summed (:func:`speed_sign_detector.tools.eval_bag.sum_drive_metrics`); absent
+    counts summed (:func:`speed_sign_detector.tools.bag_grading.sum_drive_metrics`); absent
     when no bag has truth.
 
 :func:`format_table` is the terminal table, :func:`write_summary_png` the picture
@@ -41,11 +41,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from speed_sign_detector.tools.eval_bag import (
-    numpy_json_default,
-    sum_drive_metrics,
-    summary_json,
-)
+from speed_sign_detector.tools.bag_grading import sum_drive_metrics
+from speed_sign_detector.tools.eval_bag import numpy_json_default, summary_json
 from speed_sign_detector.tools.fleet_jobs import BagOutcome, FleetError
 
 #: Longest bag name shown in the table, characters.
