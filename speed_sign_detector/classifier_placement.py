@@ -9,19 +9,21 @@ The rule (auto, ``classifier_workers: 0``), for ``cpus`` the CPUs this process m
 
 - stages not overlapped (``overlap_stages: false``): in this process. The worker
   classifies each frame after detecting it, so a process would only add the hand-over.
-- ``cpus <= 4`` (:data:`SMALL_HOST_MAX_CPUS`): in this process, on the recognition thread
-  beside the detector. On the 2-core development machine worker processes gained nothing
-  (the cores, not the GIL, are what the stages share); with 3-4 CPUs the rule below
-  would give one worker process, whose gain is unmeasured there.
-- larger hosts: ``min(3, (cpus - 2) // 2)`` worker processes. Two CPUs are left to the
-  detector thread and to the executor and DDS, and half of the rest to whatever else the
-  host runs; the cap, :data:`MAX_AUTO_WORKERS`, is what the measurements justify: on a
-  16-core NVIDIA H100 host the node kept a 30 Hz 640x480 camera only with 2 worker
-  processes (27-29 fps in-thread), 1920x1080 at 30 Hz with 2 and at 60 Hz with 3.
+- one CPU: in this process (a worker process could not run beside the detector).
+- two CPUs or more: ``max(1, min(3, (cpus - 2) // 2))`` worker processes. Two CPUs are
+  left to the detector thread and to the executor and DDS, and half of the rest to
+  whatever else the host runs; the cap, :data:`MAX_AUTO_WORKERS`, is what the
+  measurements justify: on a 16-core NVIDIA H100 host the node kept a 30 Hz 640x480
+  camera only with 2 worker processes (27-29 fps in-thread), 1920x1080 at 30 Hz with 2
+  and at 60 Hz with 3. Small hosts get one: with the CPU detector (the choice on a
+  software OpenGL renderer) detection and recognition in one interpreter take turns with
+  its GIL, and on the 2-core development machine one worker process answered more frames
+  than the recognition thread, measured in the same minutes (node at 1280x720 and 30 Hz:
+  18.5 fps against 14.1; ``speed_sign_eval bag`` at 640x480: 26 against 19 fps).
 
 ``classifier_process: true`` is honoured: with auto workers it means worker processes on
 any host, ``max(1, ...)`` of them. ``false`` is the default and leaves the choice to the
-rule; to keep the classifier in this process on a large host, set ``classifier_workers:
+rule; to keep the classifier in this process on any host, set ``classifier_workers:
 1``. An explicit ``classifier_workers`` (1 to 16) is used as given, as before.
 """
 from __future__ import annotations
@@ -34,8 +36,6 @@ from speed_sign_detector.config import PipelineConfig
 
 #: ``classifier_workers`` value meaning "size to the host".
 AUTO_WORKERS = 0
-#: Hosts with at most this many usable CPUs classify in this process (auto).
-SMALL_HOST_MAX_CPUS = 4
 #: CPUs auto leaves to the detector thread, the executor and DDS.
 RESERVED_CPUS = 2
 #: Most worker processes auto starts (3 kept a 60 Hz 1920x1080 camera on an H100 host).
@@ -109,9 +109,9 @@ def choose_classifier_placement(cpus: int, classifier_workers: int,
     if not overlap_stages:
         return ClassifierPlacement(cpus, 1, False, True,
                                    f'auto for {cpus} CPUs, stages not overlapped')
-    if cpus <= SMALL_HOST_MAX_CPUS:
-        return ClassifierPlacement(cpus, 1, False, True, f'auto for {cpus} CPUs')
-    return ClassifierPlacement(cpus, sized, True, True, f'auto for {cpus} CPUs')
+    if cpus == 1:
+        return ClassifierPlacement(cpus, 1, False, True, 'auto for 1 CPU')
+    return ClassifierPlacement(cpus, max(1, sized), True, True, f'auto for {cpus} CPUs')
 
 
 def place_classifier(config: PipelineConfig, overlap_stages: bool = True,

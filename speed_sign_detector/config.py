@@ -390,22 +390,23 @@ class PipelineConfig:
     classifier_process: bool = setting(
         False, 'Run the classifier in a worker process of its own instead of in this one, '
         'so that detection and recognition do not take turns with one Python interpreter '
-        '(its GIL). Meant for many-core machines with a GPU: on an NVIDIA H100 host the '
-        'node answered 26-29 fps of a 30 Hz 1920x1080 camera with it against 23-25 without; '
-        'on 2 cores no gain was measured. Costs a second process (its start-up and '
-        'memory). With classifier_workers 0 (auto), false leaves the choice to the host '
-        'size and true asks for worker processes on any host.')
+        '(its GIL). On an NVIDIA H100 host the node answered 26-29 fps of a 30 Hz '
+        '1920x1080 camera with it against 23-25 without; on a 2-core host with the CPU '
+        'detector, 18.5 against 14.1 fps of a 30 Hz 1280x720 camera. Costs a second process '
+        '(its start-up and memory). With classifier_workers 0 (auto), false leaves the '
+        'choice to the host size and true asks for worker processes on any host.')
     classifier_workers: int = setting(
         0, 'Frames classified at the same time, each by a worker process of its own '
         '(above 1 it needs classifier_process: true); frames are still tracked and '
         'published in the order they came. Each worker costs a process (its start-up and '
-        'memory). 0 = auto, sized to the CPUs the node may use: in this process (a '
-        'thread beside the detector) with up to 4 CPUs or without overlap_stages, else '
-        'min(3, (CPUs - 2) / 2) worker processes (2 CPUs left to the detector, the '
-        'executor and DDS, half the rest to the host; on a 16-core NVIDIA H100 host a '
-        '30 Hz camera needed 2 workers at 640x480 and 1920x1080, 60 Hz 1920x1080 needed 3; '
-        'on 2 cores processes gained nothing). The node logs the choice and reports it in '
-        '/diagnostics (classifier). The offline tools take 0 as 1.',
+        'memory). 0 = auto, sized to the CPUs the node may use: max(1, min(3, (CPUs - 2) / '
+        '2)) worker processes (2 CPUs left to the detector, the executor and DDS, half the '
+        'rest to the host; on a 16-core NVIDIA H100 host a 30 Hz camera needed 2 workers at '
+        '640x480 and 1920x1080, 60 Hz 1920x1080 needed 3), in this process (a thread '
+        'beside the detector) on 1 CPU or without overlap_stages. 1 keeps the classifier '
+        'in this process. The node logs the choice and reports it in /diagnostics '
+        '(classifier); speed_sign_eval bag sizes it the same way, the fleet and the other '
+        'offline tools take 0 as 1.',
         low=0, high=16)
     detector: DetectorConfig = field(default_factory=DetectorConfig)
     classifier: ClassifierConfig = field(default_factory=ClassifierConfig)

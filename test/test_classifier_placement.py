@@ -16,18 +16,24 @@ from speed_sign_detector.config import PipelineConfig
 from speed_sign_detector.errors import ConfigError
 
 
-@pytest.mark.parametrize(('cpus', 'workers', 'in_worker_processes'), [
-    (1, 1, False), (2, 1, False), (4, 1, False),  # small hosts: the recognition thread
-    (5, 1, True), (6, 2, True), (7, 2, True),     # (cpus - 2) // 2 processes...
-    (8, 3, True), (16, 3, True), (128, 3, True),  # ...at most 3
+@pytest.mark.parametrize(('cpus', 'workers'), [
+    (2, 1), (4, 1), (5, 1),                 # small hosts: one worker process...
+    (6, 2), (7, 2),                         # ...(cpus - 2) // 2 of them...
+    (8, 3), (16, 3), (128, 3),              # ...at most 3
 ])
-def test_auto_keeps_small_hosts_in_thread_and_sizes_processes_on_large_ones(
-        cpus: int, workers: int, in_worker_processes: bool) -> None:
+def test_auto_sizes_worker_processes_to_the_host(cpus: int, workers: int) -> None:
     placement = choose_classifier_placement(cpus, 0, False)
-    assert (placement.workers, placement.in_worker_processes) == (workers,
-                                                                  in_worker_processes)
+    assert (placement.workers, placement.in_worker_processes) == (workers, True)
     assert placement.automatic and placement.cpus == cpus
     assert placement.reason == f'auto for {cpus} CPUs'
+
+
+def test_auto_on_one_cpu_keeps_the_classifier_in_this_process() -> None:
+    """A worker process could not run beside the detector: only the hand-over would
+    be added."""
+    placement = choose_classifier_placement(1, 0, False)
+    assert (placement.workers, placement.in_worker_processes) == (1, False)
+    assert placement.describe() == '1 classifier thread in this process (auto for 1 CPU)'
 
 
 def test_the_16_core_host_gets_the_workers_its_measurements_needed() -> None:
@@ -72,8 +78,10 @@ def test_place_classifier_resolves_auto_into_the_config() -> None:
     assert (placed.classifier_process, placed.classifier_workers) == (True, 3)
     assert placed.classify is False and placed.detector == config.detector
     placed, placement = place_classifier(config, cpus=2)
+    assert (placed.classifier_process, placed.classifier_workers) == (True, 1)
+    assert placement.describe() == '1 classifier worker process (auto for 2 CPUs)'
+    placed, placement = place_classifier(config, overlap_stages=False, cpus=2)
     assert (placed.classifier_process, placed.classifier_workers) == (False, 1)
-    assert placement.describe() == '1 classifier thread in this process (auto for 2 CPUs)'
 
 
 def test_usable_cpus_follow_the_affinity_mask() -> None:

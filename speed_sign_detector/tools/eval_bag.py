@@ -75,6 +75,10 @@ Example::
       the detector backend that ran the drive (``gl``, ``cpu`` or ``numpy``; with
       ``auto`` on a software GL renderer, the faster of gl and cpu on the first frames),
       its renderer, and how it was chosen (with both times).
+  ``classifier``
+      where the classifier ran: ``in this process`` or ``N worker process(es)``
+      (``classifier_workers: 0``, the default, is sized to the host as in the node:
+      :mod:`speed_sign_detector.classifier_placement`).
 
 A truncated or damaged bag ends the run with a non-zero exit status after the frames
 before the damage were processed, reported (the JSON line is still printed) and
@@ -102,6 +106,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from speed_sign_detector.bag_io import BagReader, header_stamp_ns
+from speed_sign_detector.classifier_placement import place_classifier
 from speed_sign_detector.config import PipelineConfig, load_yaml
 from speed_sign_detector.errors import ImageConversionError, SpeedSignError
 from speed_sign_detector.limit_in_force import score_time_in_limit
@@ -313,6 +318,7 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
             # backend auto may have chosen another backend after timing the first frames
             backend, renderer = pipeline.backend_name, pipeline.renderer
             backend_choice = pipeline.backend_choice
+            classifier_location = pipeline.classifier_location
         finally:
             if owns_pipeline:
                 pipeline.close()
@@ -327,6 +333,7 @@ def evaluate_bag(bag_path: Path, topic: str | None = None, truth_path: Path | No
         'start_stamp_s': start_stamp_s,
         'duration_s': round(_span_s(stamps_s), 6),
         'backend': backend, 'renderer': renderer, 'backend_choice': backend_choice,
+        'classifier': classifier_location,
         'fps': frames / loop_s if loop_s > 0 else 0.0,
         'latency_ms_p50': float(np.percentile(latencies_ms, 50)) if latencies_ms else None,
         'latency_ms_p95': float(np.percentile(latencies_ms, 95)) if latencies_ms else None,
@@ -424,7 +431,7 @@ def format_report(summary: dict[str, Any]) -> str:
                  f'{summary["duration_s"]:.1f} s of drive; {summary["fps"]:.1f} fps, latency '
                  + (f'p50 {p50:.1f} ms, p95 {p95:.1f} ms' if p50 is not None else 'n/a')
                  + f'; backend {summary["backend"]} ({summary["renderer"]}; '
-                 f'{summary["backend_choice"]})')
+                 f'{summary["backend_choice"]}); classifier {summary["classifier"]}')
     limits = ', '.join(f'{event["limit_kmh"] or "end"} at {event["time_s"]:.2f} s'
                        for event in summary['limit_events']) or 'none'
     lines.append(f'limits recognized: {limits} (s since the first frame)')
@@ -489,6 +496,7 @@ def run(args: argparse.Namespace) -> int:
     config = load_yaml(args.config) if args.config is not None else PipelineConfig()
     if args.backend is not None:
         config = dataclasses.replace(config, backend=args.backend)
+    config, _ = place_classifier(config)   # auto workers sized to the host, as in the node
     for option, given in (('--debug-images', args.debug_images),
                           ('--with-images', args.with_images)):
         if given and args.out is None:
