@@ -30,6 +30,10 @@ from test_node import (
     wait_for,
 )
 
+from speed_sign_detector.classifier_placement import (
+    choose_classifier_placement,
+    usable_cpu_count,
+)
 from speed_sign_detector.ros.messages import image_message
 
 DOMAIN_ID = module_domain('test_node_process')
@@ -119,6 +123,9 @@ def test_installed_node_talks_over_dds_and_stops_on_sigterm(probe: Probe,
     assert status == 0, output
     assert 'Traceback' not in output, output
     assert CAMERA_TOPIC in output  # the startup log names the remapped topic
+    # and where the classifier runs: sized to this host (classifier_workers 0, the default)
+    placement = choose_classifier_placement(usable_cpu_count(), 0, False)
+    assert placement.describe() in output, output
 
 
 def test_qos_override_and_clean_stop_on_ctrl_c(probe: Probe, bank_cache: Path) -> None:
