@@ -30,7 +30,7 @@ from speed_sign_detector.training.bank_training import (
     scene_examples_of,
     train_from_located,
 )
-from speed_sign_detector.training.scene_validation import cross_validate_scenes
+from speed_sign_detector.training.scene_validation import SceneFoldMeasure, cross_validate_scenes
 
 __all__ = ['VARIANTS', 'answer_is_limit', 'cross_validate', 'summarise']
 
@@ -101,11 +101,13 @@ def cross_validate(folders: Sequence[Path], folds: int = 5,
                    progress: ProgressCallback | None = None,
                    scene_folders: Sequence[Path] = (),
                    detector_config: DetectorConfig = DetectorConfig(),  # noqa: B008 (frozen)
-                   backend: str = 'auto') -> dict[str, Any]:
+                   backend: str = 'auto',
+                   scene_measures: Sequence[SceneFoldMeasure] = ()) -> dict[str, Any]:
     """k-fold validation split by track (see the module docstring). With
     ``scene_folders`` every crop fold's bank also learns from all scenes, and the scenes
     are validated too, k folds by scene (:func:`.scene_validation.cross_validate_scenes`:
-    each fold's bank learns from every crop and the other folds' scenes).
+    each fold's bank learns from every crop and the other folds' scenes; it is also
+    measured by ``scene_measures``, whose summaries join ``'scenes'``).
 
     Returns:
         ``{'folds': k, 'variants': {variant: summary over all crops}, 'fold_accuracy':
@@ -178,7 +180,8 @@ def cross_validate(folders: Sequence[Path], folds: int = 5,
         report['scene_folders'] = [str(f) for f in scene_folders]
         report['scenes'] = cross_validate_scenes(
             detected, scenes, folds, lambda kept: train_from_located(
-                located, config, rendered=rendered_crops, scenes=kept), classifier_config)
+                located, config, rendered=rendered_crops, scenes=kept), classifier_config,
+            scene_measures)
         report['unreadable'] += list(scenes.unreadable)
     return report
 
