@@ -14,7 +14,10 @@
 Both take ``--scenes SCENE_DIR`` (repeatable): annotated scene folders (GTSDB format:
 ``images/`` and ``gt.txt``) whose detector candidates teach the second opinion real
 signs in whole frames and real background (``no_sign``). ``validate`` then also reports
-k folds by scene: each fold's bank never saw that fold's scenes.
+k folds by scene: each fold's bank never saw that fold's scenes. ``--approach`` also
+reads approach sequences made from each fold's scenes through the whole pipeline, with
+that fold's bank (:mod:`.approach_validation`), and ``--scenes-only`` runs the folds by
+scene without the folds by track.
 
 With ``--json`` the last line on stdout is ONE JSON object; progress goes to stderr.
 Exit status: 0 on success, 1 when training failed (the reason on stderr), 2 for bad
@@ -23,6 +26,7 @@ usage, 130 when interrupted.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import logging
 import sys
@@ -33,6 +37,7 @@ from speed_sign_detector import __version__
 from speed_sign_detector.config import ClassifierConfig, DetectorConfig, PipelineConfig, load_yaml
 from speed_sign_detector.errors import SpeedSignError
 from speed_sign_detector.recognition.trained_bank import save_trained_bank
+from speed_sign_detector.tools.approach_validation import ApproachFolds, format_approach_line
 from speed_sign_detector.tools.cli_types import (
     integer_in_range,
     non_negative_integer,
@@ -47,6 +52,7 @@ from speed_sign_detector.training.bank_training import (
     TrainingConfig,
     train_bank,
 )
+from speed_sign_detector.training.scene_validation import validate_by_scene
 from speed_sign_detector.training.track_validation import VARIANTS, cross_validate
 from speed_sign_detector.training.value_holdout import leave_one_value_out
 
@@ -160,6 +166,16 @@ def build_parser() -> argparse.ArgumentParser:
     validate.add_argument('--values', nargs='+', metavar='KMH',
                           help='with --leave-one-value-out: the values to hold out '
                           '(default: every value with real crops)')
+    validate.add_argument('--scenes-only', action='store_true',
+                          help='with --scenes: only the k folds by scene (the k folds by '
+                          'track, most of the time, are skipped)')
+    validate.add_argument('--approach', action='store_true',
+                          help='with --scenes: each scene fold\'s bank, written to a bank '
+                          'file, also reads approach sequences made from its own fold\'s '
+                          'scenes (speed_sign_synth approach, 640x480) through the whole '
+                          'pipeline with tracking (speed_sign_eval bag\'s figures, summed '
+                          'over the folds; temporary bags of about 0.9 MB a frame in '
+                          '$TMPDIR)')
     validate.set_defaults(run=_run_validate)
     return parser
 
@@ -261,21 +277,64 @@ def _run_value_holdout(args: argparse.Namespace) -> int:
     return 1 if report['unreadable'] else 0
 
 
-def _run_validate(args: argparse.Namespace) -> int:
+def _usage_error(args: argparse.Namespace) -> str | None:
+    """What is wrong with the combination of ``validate``'s options, or None."""
     if args.values and not args.leave_one_value_out:
-        print('speed_sign_train validate: error: --values needs --leave-one-value-out',
-              file=sys.stderr)
+        return '--values needs --leave-one-value-out'
+    for option, given in (('--scenes-only', args.scenes_only), ('--approach', args.approach)):
+        if not given:
+            continue
+        if args.leave_one_value_out:
+            return f'{option} does not go with --leave-one-value-out'
+        if not args.scenes:
+            return f'{option} needs --scenes SCENE_DIR'
+        if args.no_second_opinion:
+            return (f'{option} needs the second opinion (the folds by scene train it on the '
+                    'other folds\' scenes): drop --no-second-opinion')
+    return None
+
+
+def _run_validate(args: argparse.Namespace) -> int:
+    problem = _usage_error(args)
+    if problem is not None:
+        print(f'speed_sign_train validate: error: {problem}', file=sys.stderr)
         return 2
     if args.leave_one_value_out:
         return _run_value_holdout(args)
     classifier_config, training, detector_config = _configs(args)
-    progress = _bar(args, 'validating')
+    pipeline_config = load_yaml(args.config) if args.config else PipelineConfig()
+    measures = [ApproachFolds(dataclasses.replace(pipeline_config, backend=args.backend))
+                ] if args.approach else []
+    progress = _bar(args, 'locating crops' if args.scenes_only else 'validating')
     try:
-        report = cross_validate(args.folders, args.folds, classifier_config, training, progress,
-                                args.scenes, detector_config, args.backend)
+        if args.scenes_only:
+            report = validate_by_scene(args.folders, args.scenes, args.folds,
+                                       classifier_config, training, progress, detector_config,
+                                       args.backend, measures)
+        else:
+            report = cross_validate(args.folders, args.folds, classifier_config, training,
+                                    progress, args.scenes, detector_config, args.backend,
+                                    measures)
     finally:
         progress.close()
-    print(f'{args.folds}-fold validation split by track, {report["crops"]} crops')
+    if not args.scenes_only:
+        _print_track_folds(args.folds, report)
+    if 'scenes' in report:
+        scenes = report['scenes']
+        print(f'{args.folds}-fold validation split by scene ({scenes["frames"]} frames, trained '
+              f'second opinion): {scenes["recognized"]}/{scenes["signs"]} limit signs '
+              f'recognized ({scenes["recognition_recall"]:.3f}), {scenes["false_limits"]} '
+              f'false limits ({scenes["false_limits_per_frame"]:.4f} per frame)')
+        if 'approach' in scenes:
+            print(format_approach_line(scenes['approach'], args.folds))
+    if args.json:
+        print(json.dumps(report, sort_keys=True))
+    return 1 if report['unreadable'] else 0
+
+
+def _print_track_folds(folds: int, report: dict[str, Any]) -> None:
+    """The table of :func:`cross_validate`'s folds by track, on stdout."""
+    print(f'{folds}-fold validation split by track, {report["crops"]} crops')
     header = f'{"class":>13} ' + ' '.join(f'{_VARIANT_TITLES[v]:>30}' for v in VARIANTS)
     print(header)
     print(f'{"":>13} ' + ' '.join(f'{"right / wrong limit / none":>30}' for _ in VARIANTS))
@@ -295,15 +354,6 @@ def _run_validate(args: argparse.Namespace) -> int:
     print(f'{"fold accuracy":>20} ' + ' '.join(
         f'{report["accuracy_mean"][v]:>21.4f} +- {report["accuracy_std"][v]:.4f}'
         for v in VARIANTS))
-    if 'scenes' in report:
-        scenes = report['scenes']
-        print(f'{args.folds}-fold validation split by scene ({scenes["frames"]} frames, trained '
-              f'second opinion): {scenes["recognized"]}/{scenes["signs"]} limit signs '
-              f'recognized ({scenes["recognition_recall"]:.3f}), {scenes["false_limits"]} '
-              f'false limits ({scenes["false_limits_per_frame"]:.4f} per frame)')
-    if args.json:
-        print(json.dumps(report, sort_keys=True))
-    return 1 if report['unreadable'] else 0
 
 
 def main(argv: list[str] | None = None) -> int:
