@@ -80,7 +80,7 @@ def folds_json() -> dict[str, Any]:
                        'false_limits_per_frame': 7 / 466},
             'recorded_run': _recorded(['speed_sign_train', 'validate', '../shared/data/gtsrb-dev',
                                        '../shared/data/gtsrb-lookalikes-dev', '--scenes',
-                                       '../shared/data/gtsdb-dev', '--json'])}
+                                       '../shared/data/gtsdb-dev', '--approach', '--json'])}
 
 
 def holdout_json() -> dict[str, Any]:
@@ -188,6 +188,27 @@ def test_folds_per_class_rows_flag_the_budget(markdown: ModuleType) -> None:
     summary = table_rows(sections(text)['Summary'])
     row = next(row for row in summary if row[0].startswith('recognition, 5 folds'))
     assert '0.974' in row[1] and '100: 0.67 %' in row[1]
+
+
+def test_the_scene_folds_approach_sequences_against_their_targets(
+        markdown: ModuleType) -> None:
+    """``validate --approach``: the approach rows flag 0.94 recognized and 0 wrong limits;
+    a file without them has no such rows."""
+    figures = folds_json()
+    figures['scenes']['approach'] = {'folds': 5, 'sequences': 239, 'signs': 245,
+                                     'recognized': 232, 'recall': 232 / 245,
+                                     'wrong_limits': 1}
+    text = markdown.render_results_markdown(with_long_runs(recognition_folds=figures))
+    targets = table_rows(sections(text)[FOLDS_HEADING].split('### Targets')[1])
+    recognized = row_starting(targets, 'approach sequences, 5 folds by scene (each read by a '
+                              'bank that never saw its scene): limit signs recognized >= 0.94')
+    assert recognized[1:] == ['0.947 (232 of 245 in 239 sequences)', 'yes']
+    assert row_starting(targets, 'approach sequences: wrong limits 0')[1:] == ['1', '**no**']
+    summary = table_rows(sections(text)['Summary'])
+    row = next(row for row in summary if row[0].startswith('recognition, 5 folds'))
+    assert 'approach sequences 0.947 recognized, 1 wrong limits' in row[1]
+    plain = markdown.render_results_markdown(with_long_runs(recognition_folds=folds_json()))
+    assert 'approach sequences' not in plain
 
 
 def test_holdout_per_value_rows_and_mean(markdown: ModuleType) -> None:
