@@ -475,15 +475,18 @@ def long_run_lines(results: Mapping[str, Any]) -> list[str]:
 
 
 def _approach_targets(approach: Any) -> list[list[str]]:
-    """The target rows of the scene folds' approach sequences (none without them)."""
-    if not isinstance(approach, Mapping) or approach.get('recall') is None:
+    """The target rows of the scene folds' approach sequences (none without them): the
+    approached sign of each sequence recognized (all limit signs in view beside it)."""
+    if not isinstance(approach, Mapping) or approach.get('approached_recall') is None:
         return []
     return [[f"approach sequences, {approach['folds']} folds by scene (each read by a bank "
-             f"that never saw its scene): limit signs recognized >= "
+             f"that never saw its scene): approached signs recognized >= "
              f"{APPROACH_RECOGNIZED_TARGET}",
+             f"{number(approach['approached_recall'], 3)} ({approach['approached_recognized']}"
+             f" of {approach['approached_signs']}); all limit signs in view "
              f"{number(approach['recall'], 3)} ({approach['recognized']} of "
-             f"{approach['signs']} in {approach['sequences']} sequences)",
-             _met(approach['recall'] >= APPROACH_RECOGNIZED_TARGET)],
+             f"{approach['signs']})",
+             _met(approach['approached_recall'] >= APPROACH_RECOGNIZED_TARGET)],
             ['approach sequences: wrong limits 0', str(approach['wrong_limits']),
              _met(approach['wrong_limits'] == 0)]]
 
@@ -498,9 +501,9 @@ def _summary_row(run: LongRun, figures: Section) -> list[str]:
                       f"{number(scenes['false_limits_per_frame'], 3)} false limits per frame"
                       if isinstance(scenes, Mapping) else '')
         approach = scenes.get('approach') if isinstance(scenes, Mapping) else None
-        if isinstance(approach, Mapping) and approach.get('recall') is not None:
-            scene_text += (f"; approach sequences {number(approach['recall'], 3)} recognized, "
-                           f"{approach['wrong_limits']} wrong limits")
+        if isinstance(approach, Mapping) and approach.get('approached_recall') is not None:
+            scene_text += (f"; approach sequences {number(approach['approached_recall'], 3)}"
+                           f" recognized, {approach['wrong_limits']} wrong limits")
         return [f"recognition, {figures['folds']} folds by track: accuracy; read as another "
                 f"limit (worst class)",
                 f"{number(figures['accuracy_mean'].get(SHIPPED_VARIANT, shipped['accuracy']), 3)};"

@@ -378,6 +378,9 @@ class ApproachStream:
         self.sequences, unreadable = plan_sequences(self.scenes_dir, self.config)
         #: scene files with a limit sign that could not be read (no frames from them)
         self.unreadable_scenes: list[str] = list(unreadable)
+        #: the truth track id of each sequence's approached sign, in the order the
+        #: sequences were rendered (filled while iterating; skipped sequences have none)
+        self.approached_track_ids: list[int] = []
 
     @property
     def frame_count(self) -> int:
@@ -407,6 +410,9 @@ class ApproachStream:
                 continue
             first_track_id = next_track_id
             next_track_id += len(sequence.scene_signs)
+            self.approached_track_ids.append(first_track_id + next(
+                offset for offset, sign in enumerate(sequence.scene_signs)
+                if sign is sequence.sign))
             for window in sequence.windows:
                 bgr = self._render(scene, window)
                 stamp_ns = config.stamp_ns(index)

@@ -83,6 +83,15 @@ def test_sequences_close_in_on_each_limit_sign_and_truth_matches_the_pixels(
             x, y = red_centroid(frame.bgr, (row.x1_px, row.y1_px, row.x2_px, row.y2_px))
             assert abs(x - row.centre_px[0]) < 1.5 and abs(y - row.centre_px[1]) < 1.5
         assert all(frame.truth == () for frame in gap)      # sign-free gap
+        # the stream names the approached sign's truth track, apart from the scene's others
+        approached = stream.approached_track_ids[sequence.index]
+        assert approached == rows[0].track_id
+        assert all(row.limit_kmh == sequence.sign.limit_kmh for frame in approach
+                   for row in frame.truth if row.track_id == approached)
+    assert len(stream.approached_track_ids) == len(stream.sequences)
+    others = {row.track_id for frame in frames for row in frame.truth
+              if row.limit_kmh and row.track_id not in stream.approached_track_ids}
+    assert others   # the small 30 beside the 80 has a track of its own, not approached
     # the look-alikes in view are listed with their kinds, limit 0
     kinds = {row.kind: row.limit_kmh for frame in frames for row in frame.truth}
     assert kinds['no_entry'] == 0 and kinds['no_trucks'] == 0   # GTSDB classes 17, 16

@@ -28,6 +28,7 @@ from speed_sign_detector.config import PipelineConfig
 from speed_sign_detector.recognition.trained_bank import TrainedBank
 from speed_sign_detector.tools.approach_validation import (
     ApproachFolds,
+    approached_figures,
     sum_approach_figures,
 )
 from speed_sign_detector.tools.bag_grading import DRIVE_COUNT_KEYS
@@ -115,18 +116,23 @@ def test_each_folds_approach_sequences_are_read_by_the_bank_that_never_saw_them(
             kind.isdigit() for name, signs in SCENES for kind, *_ in signs
             if f'{scene_folder}/{name}' in row['scene_files'])
         assert 0 <= row['recognized'] <= row['signs'] and row['signs'] >= row['sequences']
+        # one approached sign per sequence, each with its truth track
+        assert row['approached_signs'] == row['sequences']
+        assert 0 <= row['approached_recognized'] <= row['approached_signs']
         assert row['backend'] == 'cpu' and row['classifier']   # as eval bag reports them
         approached += row['scene_files']
     assert sorted(approached) == sorted(scene.key for scene in scenes)  # each scene once
     # the folds add up
     assert approach['sequences'] == LIMIT_SIGNS
-    for key in (*DRIVE_COUNT_KEYS, 'frames'):
+    for key in (*DRIVE_COUNT_KEYS, 'frames', 'approached_signs', 'approached_recognized'):
         assert approach[key] == sum(row[key] for row in approach['per_fold']), key
     assert approach['frames'] == LIMIT_SIGNS * (SMALL_APPROACH.frames_per_sequence
                                                 + SMALL_APPROACH.gap_frames)
     assert 0 <= approach['recognized'] <= approach['signs']
     assert 2 * approach['recognized'] >= approach['signs'], approach   # most were read
     assert approach['recall'] == approach['recognized'] / approach['signs']
+    assert approach['approached_recall'] == (approach['approached_recognized']
+                                             / approach['approached_signs'])
     judged_s = approach['judged_s']
     assert judged_s > 0 and 0.0 <= approach['time_in_correct_limit'] <= 1.0
     assert approach['time_in_correct_limit'] == pytest.approx(sum(
@@ -156,6 +162,19 @@ def test_approach_figures_weight_the_time_in_the_correct_limit_by_judged_seconds
     assert total['time_in_correct_limit'] == 0.75
     assert total['time_in_correct_limit_strict'] == 0.375 and total['judged_s'] == 4.0
     assert sum_approach_figures([unjudged], 0)['time_in_correct_limit'] is None
+    assert total['approached_signs'] == 0 and total['approached_recall'] is None
+
+
+def test_the_approached_sign_of_each_sequence_is_counted_apart_from_the_others() -> None:
+    """A scene's other signs have truth tracks of their own; the approached one is the
+    sign the sequence closes in on (:attr:`ApproachStream.approached_track_ids`)."""
+    summary = {'per_sign': [
+        {'track_id': 1, 'recognized': True}, {'track_id': 2, 'recognized': False},
+        {'track_id': 3, 'recognized': False}, {'track_id': 4, 'recognized': True}]}
+    assert approached_figures(summary, [1, 3]) == {'approached_signs': 2,
+                                                   'approached_recognized': 1}
+    assert approached_figures(summary, [9]) == {'approached_signs': 0,
+                                                'approached_recognized': 0}
 
 
 @pytest.mark.parametrize('argv, message', [

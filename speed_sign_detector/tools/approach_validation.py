@@ -50,8 +50,8 @@ from speed_sign_detector.tools.eval_bag import evaluate_bag
 from speed_sign_detector.tools.synthetic_bag import write_drive
 from speed_sign_detector.truth import write_truth
 
-__all__ = ['APPROACH_KEY', 'ApproachFolds', 'ApproachValidationError', 'format_approach_line',
-           'sum_approach_figures']
+__all__ = ['APPROACH_KEY', 'ApproachFolds', 'ApproachValidationError', 'approached_figures',
+           'format_approach_line', 'sum_approach_figures']
 
 _LOG = logging.getLogger(__name__)
 
@@ -146,7 +146,8 @@ class ApproachFolds:
                         f'scene fold {fold}, approach sequences of {folder}: the bag was '
                         f'not read to its end: {evaluation.stopped_by}'
                     ) from evaluation.stopped_by
-                summaries.append(evaluation.summary)
+                summaries.append({**evaluation.summary, **approached_figures(
+                    evaluation.summary, stream.approached_track_ids)})
                 sequences += len(stream.sequences)
                 approached += sorted({f'{folder}/{sequence.scene_file}'
                                       for sequence in stream.sequences})
@@ -158,9 +159,11 @@ class ApproachFolds:
             'backend': last.get('backend'), 'classifier': last.get('classifier'),
             'elapsed_s': time.perf_counter() - started}
         self.per_fold.append(figures)
-        _LOG.info('scene fold %d approach sequences: %d/%d limit signs recognized in %d '
-                  'sequences, %d wrong limits, time in the correct limit %s (%.0f s)', fold,
-                  figures['recognized'], figures['signs'], sequences, figures['wrong_limits'],
+        _LOG.info('scene fold %d approach sequences: %d/%d approached signs recognized, '
+                  '%d/%d limit signs in view, in %d sequences, %d wrong limits, time in the '
+                  'correct limit %s (%.0f s)', fold, figures['approached_recognized'],
+                  figures['approached_signs'], figures['recognized'], figures['signs'],
+                  sequences, figures['wrong_limits'],
                   _share(figures['time_in_correct_limit']), figures['elapsed_s'])
 
     def summary(self) -> dict[str, Any]:
@@ -179,6 +182,31 @@ class ApproachFolds:
                 'per_fold': self.per_fold}
 
 
+def approached_figures(summary: Mapping[str, Any], approached_track_ids: Sequence[int]
+                       ) -> dict[str, int]:
+    """How many of the approached signs (one per sequence: the sign its view closes in
+    on) a bag's evaluation recognized.
+
+    The other signs of a scene are in view too and have truth tracks of their own
+    (``signs`` counts them all); many stay small and at the image's edge. The approached
+    sign is what a sequence is made for, as a drive passes one sign after another.
+
+    Args:
+        summary: a ``speed_sign_eval bag --json`` object with truth (its ``per_sign``).
+        approached_track_ids: the truth track of each sequence's approached sign
+            (:attr:`~speed_sign_detector.approach_sequences.ApproachStream.
+            approached_track_ids`).
+
+    Returns:
+        ``{'approached_signs', 'approached_recognized'}``: the approached signs that had
+        a truth row (in view at least once) and those recognized.
+    """
+    wanted = set(approached_track_ids)
+    outcomes = [sign for sign in summary['per_sign'] if sign['track_id'] in wanted]
+    return {'approached_signs': len(outcomes),
+            'approached_recognized': sum(bool(sign['recognized']) for sign in outcomes)}
+
+
 def sum_approach_figures(summaries: Sequence[Mapping[str, Any]], sequences: int
                          ) -> dict[str, Any]:
     """The approach figures of several bags (or folds) together.
@@ -193,7 +221,9 @@ def sum_approach_figures(summaries: Sequence[Mapping[str, Any]], sequences: int
         :data:`~speed_sign_detector.tools.bag_grading.DRIVE_COUNT_KEYS` summed with
         ``recall`` and ``false_limits_per_hour``, ``drive_time_s`` (seconds), and
         ``time_in_correct_limit`` / ``time_in_correct_limit_strict`` (shares 0..1, None
-        when nothing was judged) weighted by ``judged_s`` (seconds, summed).
+        when nothing was judged) weighted by ``judged_s`` (seconds, summed), and
+        ``approached_signs``, ``approached_recognized`` (:func:`approached_figures`,
+        summed) with ``approached_recall`` (None without approached signs).
     """
     counts = {key: sum(int(summary[key]) for summary in summaries)
               for key in DRIVE_COUNT_KEYS}
@@ -208,7 +238,12 @@ def sum_approach_figures(summaries: Sequence[Mapping[str, Any]], sequences: int
         return math.fsum(float(summary[key]) * float(summary['judged_s'])
                          for summary in judged) / judged_s
 
+    approached = sum(int(summary.get('approached_signs', 0)) for summary in summaries)
+    approached_recognized = sum(int(summary.get('approached_recognized', 0))
+                                for summary in summaries)
     return {'sequences': sequences,
+            'approached_signs': approached, 'approached_recognized': approached_recognized,
+            'approached_recall': approached_recognized / approached if approached else None,
             'frames': sum(int(summary['frames']) for summary in summaries),
             **drive_metrics(counts, drive_time_s),
             'time_in_correct_limit': weighted('time_in_correct_limit'),
@@ -221,7 +256,11 @@ def format_approach_line(figures: Mapping[str, Any], folds: int) -> str:
     recall = figures['recall']
     line = (f'approach sequences, {folds} folds by scene ({figures["sequences"]} sequences, '
             f'{figures["frames"]} frames, each read by the bank of its scenes\' fold): '
-            f'{figures["recognized"]}/{figures["signs"]} limit signs recognized'
+            f'{figures["approached_recognized"]}/{figures["approached_signs"]} approached '
+            f'signs recognized'
+            + (f' ({figures["approached_recall"]:.3f})'
+               if figures['approached_recall'] is not None else '')
+            + f'; all limit signs in view {figures["recognized"]}/{figures["signs"]}'
             + (f' ({recall:.3f})' if recall is not None else '')
             + f', {figures["wrong_limits"]} wrong limits')
     if figures['end_of_limit_signs'] or figures['wrong_end_of_limits']:
