@@ -13,13 +13,16 @@ import subprocess
 from pathlib import Path
 
 import pytest
-from scene_helpers import write_gtsdb_scenes
-from test_recognition_scene_training import COPIES, HEIGHT, SCENES, WIDTH
+from test_recognition_scene_training import (  # noqa: F401 (module fixtures)
+    COPIES,
+    SCENES,
+    crop_folder,
+    scene_folder,
+)
 from test_recognition_training import (
     SMALL,
     TRAINING,
     _train_command,
-    write_crop_folder,
     write_small_params,
 )
 
@@ -57,17 +60,6 @@ QUICK_TRAINING = dataclasses.replace(TRAINING, augmented_copies=0, rendered_per_
                                      design_per_kind=0)
 #: The limit signs of :data:`SCENES`, one approach sequence each.
 LIMIT_SIGNS = sum(kind.isdigit() for _, signs in SCENES for kind, *_ in signs)
-
-
-@pytest.fixture(scope='module')
-def scene_folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return write_gtsdb_scenes(tmp_path_factory.mktemp('scenes'), SCENES, WIDTH, HEIGHT)
-
-
-@pytest.fixture(scope='module')
-def crop_folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return write_crop_folder(tmp_path_factory.mktemp('crops'), tracks_per_class=2,
-                             per_track=2)
 
 
 class _RecordingApproachFolds(ApproachFolds):
