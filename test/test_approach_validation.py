@@ -172,6 +172,7 @@ def test_the_approached_sign_of_each_sequence_is_counted_apart_from_the_others()
 @pytest.mark.parametrize('argv, message', [
     (['--approach'], '--approach needs --scenes'),
     (['--scenes-only'], '--scenes-only needs --scenes'),
+    (['--boxes'], '--boxes needs --scenes'),
     (['--scenes', 'S', '--approach', '--leave-one-value-out'], 'does not go with'),
     (['--scenes', 'S', '--scenes-only', '--no-second-opinion'], 'needs the second opinion'),
 ])

@@ -16,8 +16,9 @@ Both take ``--scenes SCENE_DIR`` (repeatable): annotated scene folders (GTSDB fo
 signs in whole frames and real background (``no_sign``). ``validate`` then also reports
 k folds by scene: each fold's bank never saw that fold's scenes. ``--approach`` also
 reads approach sequences made from each fold's scenes through the whole pipeline, with
-that fold's bank (:mod:`.approach_validation`), and ``--scenes-only`` runs the folds by
-scene without the folds by track.
+that fold's bank (:mod:`.approach_validation`), ``--boxes`` reads the annotated boxes of
+each fold's scenes as crops with that fold's bank (:mod:`..training.scene_box_validation`),
+and ``--scenes-only`` runs the folds by scene without the folds by track.
 
 With ``--json`` the last line on stdout is ONE JSON object; progress goes to stderr.
 Exit status: 0 on success, 1 when training failed (the reason on stderr), 2 for bad
@@ -52,7 +53,12 @@ from speed_sign_detector.training.bank_training import (
     TrainingConfig,
     train_bank,
 )
-from speed_sign_detector.training.scene_validation import validate_by_scene
+from speed_sign_detector.training.scene_box_validation import (
+    BOXES_KEY,
+    SceneBoxFolds,
+    format_boxes_line,
+)
+from speed_sign_detector.training.scene_validation import SceneFoldMeasure, validate_by_scene
 from speed_sign_detector.training.track_validation import VARIANTS, cross_validate
 from speed_sign_detector.training.value_holdout import leave_one_value_out
 
@@ -176,6 +182,11 @@ def build_parser() -> argparse.ArgumentParser:
                           'pipeline with tracking (speed_sign_eval bag\'s figures, summed '
                           'over the folds; temporary bags of about 0.9 MB a frame in '
                           '$TMPDIR)')
+    validate.add_argument('--boxes', action='store_true',
+                          help='with --scenes: each scene fold\'s bank also reads the '
+                          'annotated boxes of its own fold\'s scenes as crops, tight and '
+                          'padded by 10 %% (read right, another limit, round look-alikes '
+                          'read as a limit; another camera\'s crops, held out)')
     validate.set_defaults(run=_run_validate)
     return parser
 
@@ -281,7 +292,8 @@ def _usage_error(args: argparse.Namespace) -> str | None:
     """What is wrong with the combination of ``validate``'s options, or None."""
     if args.values and not args.leave_one_value_out:
         return '--values needs --leave-one-value-out'
-    for option, given in (('--scenes-only', args.scenes_only), ('--approach', args.approach)):
+    for option, given in (('--scenes-only', args.scenes_only), ('--approach', args.approach),
+                          ('--boxes', args.boxes)):
         if not given:
             continue
         if args.leave_one_value_out:
@@ -303,8 +315,10 @@ def _run_validate(args: argparse.Namespace) -> int:
         return _run_value_holdout(args)
     classifier_config, training, detector_config = _configs(args)
     pipeline_config = load_yaml(args.config) if args.config else PipelineConfig()
-    measures = [ApproachFolds(dataclasses.replace(pipeline_config, backend=args.backend))
-                ] if args.approach else []
+    measures: list[SceneFoldMeasure] = [SceneBoxFolds(classifier_config)] if args.boxes else []
+    if args.approach:
+        measures.append(ApproachFolds(dataclasses.replace(pipeline_config,
+                                                          backend=args.backend)))
     progress = _bar(args, 'locating crops' if args.scenes_only else 'validating')
     try:
         if args.scenes_only:
@@ -325,6 +339,8 @@ def _run_validate(args: argparse.Namespace) -> int:
               f'second opinion): {scenes["recognized"]}/{scenes["signs"]} limit signs '
               f'recognized ({scenes["recognition_recall"]:.3f}), {scenes["false_limits"]} '
               f'false limits ({scenes["false_limits_per_frame"]:.4f} per frame)')
+        if BOXES_KEY in scenes:
+            print(format_boxes_line(scenes[BOXES_KEY], args.folds))
         if 'approach' in scenes:
             print(format_approach_line(scenes['approach'], args.folds))
     if args.json:
