@@ -50,14 +50,14 @@ bank: $(INSTALLED)
 
 ## validate: the recognition figures too slow for make bench (about 1.5 h on 2 cores), as
 ## JSON in out/validation/ with their command and host: 5 folds by track (and by scene,
-## with the scene folds' approach sequences),
+## with the scene folds' approach sequences and boxes),
 ## leave one value out, the rendered sign designs; make bench adds them to bench/RESULTS.md
 .PHONY: validate
 validate: $(INSTALLED)
 	mkdir -p $(OUT)/validation
 	$(BIN)/python bench/record_json.py $(OUT)/validation/folds.json -- $(BIN)/speed_sign_train \
 		validate $(DATA)/gtsrb-dev $(DATA)/gtsrb-lookalikes-dev --scenes $(DATA)/gtsdb-dev \
-		--approach --json
+		--approach --boxes --json
 	$(BIN)/python bench/record_json.py $(OUT)/validation/value_holdout.json -- \
 		$(BIN)/speed_sign_train validate $(DATA)/gtsrb-dev $(DATA)/gtsrb-lookalikes-dev \
 		--leave-one-value-out --json

@@ -45,7 +45,7 @@ LONG_RUNS: tuple[LongRun, ...] = (
     LongRun('recognition_folds', '--validation', 'Recognition per value: 5 folds by track',
             'make validate', 'speed_sign_train validate ../shared/data/gtsrb-dev '
             '../shared/data/gtsrb-lookalikes-dev --scenes ../shared/data/gtsdb-dev --approach '
-            '--json'),
+            '--boxes --json'),
     LongRun('value_holdout', '--value-holdout', 'Leave one value out', 'make validate',
             'speed_sign_train validate ../shared/data/gtsrb-dev '
             '../shared/data/gtsrb-lookalikes-dev --leave-one-value-out --json'),
@@ -287,6 +287,14 @@ def fold_lines(folds: Section) -> list[str]:
         others.append(f"renderings only (no trained bank): {number(rendered['accuracy'], 3)} "
                       f"read right, {percent(rendered['wrong_limit_rate'])} read as another "
                       f"limit")
+    boxes = scenes.get('boxes') if isinstance(scenes, Mapping) else None
+    if isinstance(boxes, Mapping):
+        others += [f"gtsdb-dev boxes read as crops by the scene folds' banks, {cut}: "
+                   f"{number(boxes[cut]['accuracy'], 3)} read right "
+                   f"({boxes[cut]['right']} of {boxes[cut]['limit_signs']}), "
+                   f"{boxes[cut]['wrong_limits']} another limit, "
+                   f"{boxes[cut]['lookalikes_read_as_limit']} of {boxes[cut]['lookalikes']} "
+                   f"look-alikes read as a limit" for cut in ('tight', 'padded')]
     if folds.get('unreadable'):
         others.append(f"{len(folds['unreadable'])} unreadable files skipped")
     return lines + ['', 'Also: ' + '; '.join(others) + '.']

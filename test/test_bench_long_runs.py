@@ -80,7 +80,8 @@ def folds_json() -> dict[str, Any]:
                        'false_limits_per_frame': 7 / 466},
             'recorded_run': _recorded(['speed_sign_train', 'validate', '../shared/data/gtsrb-dev',
                                        '../shared/data/gtsrb-lookalikes-dev', '--scenes',
-                                       '../shared/data/gtsdb-dev', '--approach', '--json'])}
+                                       '../shared/data/gtsdb-dev', '--approach', '--boxes',
+                                       '--json'])}
 
 
 def holdout_json() -> dict[str, Any]:
@@ -211,7 +212,20 @@ def test_the_scene_folds_approach_sequences_against_their_targets(
     row = next(row for row in summary if row[0].startswith('recognition, 5 folds'))
     assert 'approach sequences 0.946 recognized, 1 wrong limits' in row[1]
     plain = markdown.render_results_markdown(with_long_runs(recognition_folds=folds_json()))
-    assert 'approach sequences' not in plain
+    assert 'approach sequences' not in plain and 'gtsdb-dev boxes' not in plain
+
+
+def test_the_scene_folds_boxes_are_listed_per_cut(markdown: ModuleType) -> None:
+    figures = folds_json()
+    cut = {'limit_signs': 284, 'right': 270, 'wrong_limits': 1, 'withheld': 13,
+           'accuracy': 270 / 284, 'lookalikes': 256, 'lookalikes_read_as_limit': 0}
+    figures['scenes']['boxes'] = {'folds': 5, 'tight': cut,
+                                  'padded': {**cut, 'right': 263, 'accuracy': 263 / 284}}
+    part = sections(markdown.render_results_markdown(
+        with_long_runs(recognition_folds=figures)))[FOLDS_HEADING]
+    assert ("gtsdb-dev boxes read as crops by the scene folds' banks, tight: 0.951 read "
+            "right (270 of 284), 1 another limit, 0 of 256 look-alikes read as a limit") in part
+    assert "padded: 0.926 read right (263 of 284)" in part
 
 
 def test_holdout_per_value_rows_and_mean(markdown: ModuleType) -> None:
