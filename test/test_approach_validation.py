@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 from test_recognition_scene_training import (  # noqa: F401 (module fixtures)
-    COPIES,
     SCENES,
+    RecordedSceneTraining,
     crop_folder,
     scene_folder,
 )
@@ -36,18 +36,7 @@ from speed_sign_detector.tools.approach_validation import (
 )
 from speed_sign_detector.tools.bag_grading import DRIVE_COUNT_KEYS
 from speed_sign_detector.tools.train import main as train_main
-from speed_sign_detector.training.bank_training import (
-    locate_signs,
-    read_crops,
-    rendered_classifier,
-    train_from_located,
-)
-from speed_sign_detector.training.scene_examples import (
-    SceneExamples,
-    detect_scenes,
-    read_scene_examples,
-    scene_folds,
-)
+from speed_sign_detector.training.scene_examples import scene_folds
 from speed_sign_detector.training.scene_validation import cross_validate_scenes
 
 #: Short sequences at 320x240 from the 480x320 scenes: the signs (30-36 px) start at
@@ -76,24 +65,15 @@ class _RecordingApproachFolds(ApproachFolds):
 
 def test_each_folds_approach_sequences_are_read_by_the_bank_that_never_saw_them(
         crop_folder: Path, scene_folder: Path, tmp_path: Path) -> None:
-    classifier = rendered_classifier(SMALL)
-    crops, images, _ = read_crops([crop_folder])
-    located = locate_signs(classifier, crops, images)
-    scenes, _ = detect_scenes([scene_folder])
-    examples = read_scene_examples(scenes, classifier, COPIES)
-    trained_on: list[set[str]] = []
-    trained: list[TrainedBank] = []
-
-    def train(kept: SceneExamples) -> TrainedBank:  # real training; records what it saw
-        trained_on.append(set(kept.scenes))
-        trained.append(train_from_located(located, QUICK_TRAINING, scenes=kept))
-        return trained[-1]
+    recorded = RecordedSceneTraining(crop_folder, scene_folder, QUICK_TRAINING)
+    scenes, trained_on, trained = recorded.scenes, recorded.trained_on, recorded.trained
 
     work = tmp_path / 'work'
     work.mkdir()
     measure = _RecordingApproachFolds(PipelineConfig(backend='cpu', classifier=SMALL),
                                       SMALL_APPROACH, work_dir=work)
-    report = cross_validate_scenes(scenes, examples, 2, train, SMALL, [measure])
+    report = cross_validate_scenes(scenes, recorded.examples, 2, recorded.train, SMALL,
+                                   [measure])
     fold_of = scene_folds([scene.key for scene in scenes], 2)
     approach = report['approach']
     assert approach['folds'] == 2 and len(approach['per_fold']) == 2

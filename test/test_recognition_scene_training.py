@@ -26,9 +26,10 @@ from speed_sign_detector.recognition.sign_features import FEATURE_SIZE
 from speed_sign_detector.recognition.trained_bank import TrainedBank, load_trained_bank
 from speed_sign_detector.scene_truth import SceneSign
 from speed_sign_detector.training.bank_training import (
-    rendered_classifier,
+    TrainingConfig,
     locate_signs,
     read_crops,
+    rendered_classifier,
     train_bank,
     train_from_located,
 )
@@ -132,19 +133,39 @@ def test_bank_trained_with_scenes_records_them_and_knows_background(
     assert SCENE_BACKGROUND_LABEL in bank.second_opinion.real_labels
 
 
+class RecordedSceneTraining:
+    """The scenes of a folder detected, their examples, and a ``train`` for
+    :func:`cross_validate_scenes` that really trains (on every crop of a crop folder and
+    the scene examples it is given) and records what each bank saw.
+
+    Attributes:
+        scenes, examples: the detected scenes and their training examples.
+        trained_on: per call of :meth:`train`, the scene keys its bank learned from.
+        trained: per call, the bank.
+    """
+
+    def __init__(self, crop_folder: Path, scene_folder: Path,
+                 training: TrainingConfig = TRAINING) -> None:
+        classifier = rendered_classifier(SMALL)
+        crops, images, _ = read_crops([crop_folder])
+        self._located = locate_signs(classifier, crops, images)
+        self._training = training
+        self.scenes, _ = detect_scenes([scene_folder])
+        self.examples = read_scene_examples(self.scenes, classifier, COPIES)
+        self.trained_on: list[set[str]] = []
+        self.trained: list[TrainedBank] = []
+
+    def train(self, kept: SceneExamples) -> TrainedBank:
+        self.trained_on.append(set(kept.scenes))
+        self.trained.append(train_from_located(self._located, self._training, scenes=kept))
+        return self.trained[-1]
+
+
 def test_scene_cross_validation_answers_every_scene_with_a_bank_that_never_saw_it(
         crop_folder: Path, scene_folder: Path) -> None:
-    classifier = rendered_classifier(SMALL)
-    crops, images, _ = read_crops([crop_folder])
-    located = locate_signs(classifier, crops, images)
-    scenes, _ = detect_scenes([scene_folder])
-    examples = read_scene_examples(scenes, classifier, COPIES)
-    trained_on: list[set[str]] = []
-
-    def train(kept: SceneExamples) -> TrainedBank:  # real training; records what it saw
-        trained_on.append(set(kept.scenes))
-        return train_from_located(located, TRAINING, scenes=kept)
-
+    recorded = RecordedSceneTraining(crop_folder, scene_folder)
+    scenes, examples, train = recorded.scenes, recorded.examples, recorded.train
+    trained_on = recorded.trained_on
     report = cross_validate_scenes(scenes, examples, 2, train, SMALL)
     folds = scene_folds([scene.key for scene in scenes], 2)
     assert report['frames'] == len(SCENES)

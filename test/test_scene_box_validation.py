@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from test_approach_validation import QUICK_TRAINING
 from test_recognition_scene_training import (  # noqa: F401 (module fixtures)
-    COPIES,
     SCENES,
+    RecordedSceneTraining,
     crop_folder,
     scene_folder,
 )
@@ -20,24 +20,13 @@ from test_recognition_training import SMALL
 
 from speed_sign_detector.recognition.trained_bank import TrainedBank
 from speed_sign_detector.scene_truth import SceneSign
-from speed_sign_detector.training.bank_training import (
-    locate_signs,
-    read_crops,
-    rendered_classifier,
-    train_from_located,
-)
 from speed_sign_detector.training.scene_box_validation import (
     BOX_CUTS,
     SceneBoxFolds,
     box_crop,
     format_boxes_line,
 )
-from speed_sign_detector.training.scene_examples import (
-    SceneExamples,
-    detect_scenes,
-    read_scene_examples,
-    scene_folds,
-)
+from speed_sign_detector.training.scene_examples import scene_folds
 from speed_sign_detector.training.scene_validation import cross_validate_scenes
 
 LIMITS = sum(kind.isdigit() for _, signs in SCENES for kind, *_ in signs)
@@ -60,21 +49,11 @@ class _RecordingBoxFolds(SceneBoxFolds):
 
 def test_each_folds_boxes_are_read_by_the_bank_that_never_saw_them(
         crop_folder: Path, scene_folder: Path) -> None:
-    classifier = rendered_classifier(SMALL)
-    crops, images, _ = read_crops([crop_folder])
-    located = locate_signs(classifier, crops, images)
-    scenes, _ = detect_scenes([scene_folder])
-    examples = read_scene_examples(scenes, classifier, COPIES)
-    trained_on: list[set[str]] = []
-    trained: list[TrainedBank] = []
-
-    def train(kept: SceneExamples) -> TrainedBank:  # real training; records what it saw
-        trained_on.append(set(kept.scenes))
-        trained.append(train_from_located(located, QUICK_TRAINING, scenes=kept))
-        return trained[-1]
-
+    recorded = RecordedSceneTraining(crop_folder, scene_folder, QUICK_TRAINING)
+    scenes, trained_on, trained = recorded.scenes, recorded.trained_on, recorded.trained
     measure = _RecordingBoxFolds(SMALL)
-    report = cross_validate_scenes(scenes, examples, 2, train, SMALL, [measure])
+    report = cross_validate_scenes(scenes, recorded.examples, 2, recorded.train, SMALL,
+                                   [measure])
     fold_of = scene_folds([scene.key for scene in scenes], 2)
     boxes = report['boxes']
     assert boxes['folds'] == 2 and len(boxes['per_fold']) == 2
