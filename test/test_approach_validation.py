@@ -10,6 +10,7 @@ import dataclasses
 import json
 import os
 import subprocess
+from collections.abc import Sequence
 from pathlib import Path
 
 import pytest
@@ -36,7 +37,7 @@ from speed_sign_detector.tools.approach_validation import (
 )
 from speed_sign_detector.tools.bag_grading import DRIVE_COUNT_KEYS
 from speed_sign_detector.tools.train import main as train_main
-from speed_sign_detector.training.scene_examples import scene_folds
+from speed_sign_detector.training.scene_examples import DetectedScene, scene_folds
 from speed_sign_detector.training.scene_validation import cross_validate_scenes
 
 #: Short sequences at 320x240 from the 480x320 scenes: the signs (30-36 px) start at
@@ -58,9 +59,10 @@ class _RecordingApproachFolds(ApproachFolds):
         super().__init__(*args, **kwargs)  # type: ignore[arg-type]
         self.banks: list[TrainedBank] = []
 
-    def measure_fold(self, fold: int, bank: TrainedBank, scene_images: list[Path]) -> None:
+    def measure_fold(self, fold: int, bank: TrainedBank,
+                     scenes: Sequence[DetectedScene]) -> None:
         self.banks.append(bank)
-        super().measure_fold(fold, bank, scene_images)
+        super().measure_fold(fold, bank, scenes)
 
 
 def test_each_folds_approach_sequences_are_read_by_the_bank_that_never_saw_them(

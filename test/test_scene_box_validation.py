@@ -5,6 +5,7 @@ training per fold, the boxes cut from the scene files and read by each fold's cl
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +27,7 @@ from speed_sign_detector.training.scene_box_validation import (
     box_crop,
     format_boxes_line,
 )
-from speed_sign_detector.training.scene_examples import scene_folds
+from speed_sign_detector.training.scene_examples import DetectedScene, scene_folds
 from speed_sign_detector.training.scene_validation import cross_validate_scenes
 
 LIMITS = sum(kind.isdigit() for _, signs in SCENES for kind, *_ in signs)
@@ -40,11 +41,10 @@ class _RecordingBoxFolds(SceneBoxFolds):
         super().__init__(*args)  # type: ignore[arg-type]
         self.measured: list[tuple[TrainedBank, list[str]]] = []
 
-    def measure_fold(self, fold: int, bank: TrainedBank, scene_images: list[Path]) -> None:
-        # the scene keys of the folds: FOLDER/FILE
-        self.measured.append((bank, [f'{Path(image).parent.parent}/{Path(image).name}'
-                                     for image in scene_images]))
-        super().measure_fold(fold, bank, scene_images)
+    def measure_fold(self, fold: int, bank: TrainedBank,
+                     scenes: Sequence[DetectedScene]) -> None:
+        self.measured.append((bank, [scene.key for scene in scenes]))
+        super().measure_fold(fold, bank, scenes)
 
 
 def test_each_folds_boxes_are_read_by_the_bank_that_never_saw_them(

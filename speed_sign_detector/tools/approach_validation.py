@@ -37,14 +37,13 @@ import tempfile
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from speed_sign_detector.approach_sequences import ApproachConfig, ApproachStream
 from speed_sign_detector.classifier_placement import place_classifier
 from speed_sign_detector.config import PipelineConfig
 from speed_sign_detector.errors import SpeedSignError
 from speed_sign_detector.recognition.trained_bank import TrainedBank, save_trained_bank
-from speed_sign_detector.scene_truth import read_gtsdb_truth
 from speed_sign_detector.tools.bag_grading import DRIVE_COUNT_KEYS, drive_metrics
 from speed_sign_detector.tools.eval_bag import evaluate_bag
 from speed_sign_detector.tools.synthetic_bag import write_drive
@@ -59,6 +58,20 @@ _LOG = logging.getLogger(__name__)
 APPROACH_KEY = 'approach'
 #: The bag format of the temporary approach bags.
 _BAG_FORMAT = 'mcap'
+
+
+class FoldScene(Protocol):
+    """What this module reads of a fold's scene: a
+    :class:`~speed_sign_detector.training.scene_examples.DetectedScene` (not imported: no
+    tool but ``speed_sign_train`` imports the training package)."""
+
+    @property
+    def path(self) -> Path:
+        """The scene's image file, ``FOLDER/images/FILE``."""
+
+    @property
+    def signs(self) -> Sequence[object]:
+        """Its annotated signs."""
 
 
 class ApproachValidationError(SpeedSignError):
@@ -97,19 +110,18 @@ class ApproachFolds:
         self.work_dir = work_dir
         self.per_fold: list[dict[str, Any]] = []
 
-    def measure_fold(self, fold: int, bank: TrainedBank, scene_images: Sequence[Path]
+    def measure_fold(self, fold: int, bank: TrainedBank, scenes: Sequence[FoldScene]
                      ) -> None:
-        """Read the approach sequences of ``scene_images`` with ``bank``.
+        """Read the approach sequences of ``scenes`` with ``bank``.
 
         Args:
             fold: the fold's index (recorded with its figures).
             bank: the fold's bank, trained without these scenes.
-            scene_images: the fold's scene image files, ``FOLDER/images/FILE``; those
-                that ``FOLDER/gt.txt`` does not list (no sign) make no sequence.
+            scenes: the fold's scenes; those without an annotated sign make no sequence.
 
         Raises:
-            ApproachValidationError: a scene folder's truth cannot be read, the bank
-                cannot be written, or a bag cannot be made or read to its end.
+            ApproachValidationError: the bank cannot be written, or a bag cannot be made
+                or read to its end.
         """
         started = time.perf_counter()
         summaries: list[dict[str, Any]] = []
@@ -127,7 +139,7 @@ class ApproachFolds:
                     f'scene fold {fold}: cannot write its bank to {bank_path}: {err}') from err
             config = dataclasses.replace(self.pipeline_config, classifier=dataclasses.replace(
                 self.pipeline_config.classifier, bank_file=str(bank_path)))
-            for index, (folder, names) in enumerate(_annotated_scenes(fold, scene_images)):
+            for index, (folder, names) in enumerate(_annotated_scenes(scenes)):
                 approach = dataclasses.replace(self.approach_config, scenes=names,
                                                max_sequences=0)
                 bag_path, truth_path = work / f'approach_{index}', work / f'truth_{index}.csv'
@@ -275,24 +287,13 @@ def _share(value: float | None) -> str:
     return 'n/a' if value is None else f'{value:.3f}'
 
 
-def _annotated_scenes(fold: int, scene_images: Sequence[Path]
-                      ) -> list[tuple[Path, tuple[str, ...]]]:
-    """(scene folder, the names its ``gt.txt`` lists) of ``scene_images``
-    (``FOLDER/images/FILE``), folders in order of first appearance, names sorted.
-
-    Raises:
-        ApproachValidationError: a folder's ``gt.txt`` cannot be read.
-    """
-    by_folder: dict[Path, list[str]] = {}
-    for image in scene_images:
-        by_folder.setdefault(Path(image).parent.parent, []).append(Path(image).name)
-    annotated: list[tuple[Path, tuple[str, ...]]] = []
-    for folder, names in by_folder.items():
-        try:
-            listed = read_gtsdb_truth(folder / 'gt.txt')
-        except SpeedSignError as err:
-            raise ApproachValidationError(f'scene fold {fold}: {err}') from err
-        chosen = tuple(sorted(name for name in set(names) if name in listed))
-        if chosen:  # an empty choice would mean every scene of the folder
-            annotated.append((folder, chosen))
-    return annotated
+def _annotated_scenes(scenes: Sequence[FoldScene]) -> list[tuple[Path, tuple[str, ...]]]:
+    """(scene folder, the image names of its scenes with an annotated sign), folders
+    in order of first appearance, names sorted; a folder without such a scene is left
+    out (an empty choice would mean every scene of the folder)."""
+    by_folder: dict[Path, set[str]] = {}
+    for scene in scenes:
+        names = by_folder.setdefault(scene.path.parent.parent, set())
+        if scene.signs:
+            names.add(scene.path.name)
+    return [(folder, tuple(sorted(names))) for folder, names in by_folder.items() if names]

@@ -25,7 +25,6 @@ import logging
 import math
 from collections import Counter
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -34,8 +33,8 @@ from speed_sign_detector.config import ClassifierConfig
 from speed_sign_detector.labelled_crops import GTSRB_END_OF_80, GTSRB_LOOKALIKE_NAMES
 from speed_sign_detector.recognition.classifier import Classifier
 from speed_sign_detector.recognition.trained_bank import TrainedBank
-from speed_sign_detector.scene_truth import SceneSign, read_gtsdb_truth
-from speed_sign_detector.training.scene_examples import read_scene_gray
+from speed_sign_detector.scene_truth import SceneSign
+from speed_sign_detector.training.scene_examples import DetectedScene, read_scene_gray
 
 __all__ = ['BOXES_KEY', 'BOX_CUTS', 'PADDING_SHARE', 'SceneBoxFolds', 'box_crop',
            'format_boxes_line']
@@ -92,29 +91,22 @@ class SceneBoxFolds:
                  ) -> None:
         self.classifier_config = classifier_config
         self.per_fold: list[dict[str, Any]] = []
-        self._truth: dict[Path, dict[str, list[SceneSign]]] = {}
 
-    def measure_fold(self, fold: int, bank: TrainedBank, scene_images: Sequence[Path]
+    def measure_fold(self, fold: int, bank: TrainedBank, scenes: Sequence[DetectedScene]
                      ) -> None:
-        """Read the boxes of ``scene_images`` (``FOLDER/images/FILE``, each folder's
-        ``gt.txt`` lists them) with ``bank``, trained without these scenes.
-
-        Raises:
-            TruthFileError: a folder's ``gt.txt`` cannot be read.
-        """
+        """Read the annotated boxes of ``scenes`` with ``bank``, trained without them."""
         classifier = Classifier(self.classifier_config, bank)
         counts = {cut: Counter() for cut in BOX_CUTS}
         confusions = {cut: Counter() for cut in BOX_CUTS}
         unreadable: list[str] = []
-        for image in scene_images:
-            signs = self._signs_of(Path(image))
-            if not signs:
+        for scene in scenes:
+            if not scene.signs:
                 continue
-            gray = read_scene_gray(Path(image))
+            gray = read_scene_gray(scene.path)
             if gray is None:
-                unreadable.append(f'{image}: not a readable image')
+                unreadable.append(f'{scene.path}: not a readable image')
                 continue
-            for sign in signs:
+            for sign in scene.signs:
                 kind = _kind(sign)
                 if kind is None:
                     continue
@@ -149,12 +141,6 @@ class SceneBoxFolds:
             summed[cut] = _figures(counts, confusions)
         summed['per_fold'] = self.per_fold
         return summed
-
-    def _signs_of(self, image: Path) -> list[SceneSign]:
-        folder = image.parent.parent
-        if folder not in self._truth:
-            self._truth[folder] = read_gtsdb_truth(folder / 'gt.txt')
-        return self._truth[folder].get(image.name, [])
 
 
 _COUNT_KEYS = ('limit_signs', 'right', 'wrong_limits', 'withheld', 'lookalikes',

@@ -59,14 +59,15 @@ class SceneFoldMeasure(Protocol):
     #: The key of the summary in the scene report (``'approach'``).
     key: str
 
-    def measure_fold(self, fold: int, bank: TrainedBank, scene_images: Sequence[Path]
+    def measure_fold(self, fold: int, bank: TrainedBank, scenes: Sequence[DetectedScene]
                      ) -> None:
         """Measure ``bank`` (trained without the fold's scenes) on the fold's scenes.
 
         Args:
             fold: the fold's index, 0-based.
             bank: the fold's bank: every crop and the other folds' scenes.
-            scene_images: the fold's scene image files (``FOLDER/images/FILE``), sorted.
+            scenes: the fold's scenes (their image files and annotated signs), sorted by
+                image file.
         """
 
     def summary(self) -> dict[str, Any]:
@@ -129,9 +130,10 @@ def cross_validate_scenes(scenes: Sequence[DetectedScene], examples: SceneExampl
         for key, value in (('frames', frames), ('signs', signs), ('recognized', recognized),
                            ('false_limits', false_limits)):
             totals[key] += value
-        fold_images = sorted(scene.path for scene in scenes if fold_of[scene.key] == fold)
+        fold_scenes = sorted((scene for scene in scenes if fold_of[scene.key] == fold),
+                             key=lambda scene: scene.path)
         for measure in measures:
-            measure.measure_fold(fold, bank, fold_images)
+            measure.measure_fold(fold, bank, fold_scenes)
     extra = {measure.key: measure.summary() for measure in measures}
     return {'folds': folds, **totals,
             'recognition_recall': totals['recognized'] / totals['signs']
