@@ -204,11 +204,14 @@ def format_table(results: Mapping[str, Any]) -> str:
                      f"overlapping recognition (the node's default); latency p50 "
                      f"{_number(pipeline['latency_p50_ms'])} ms, p95 "
                      f"{_number(pipeline['latency_p95_ms'])} ms; stage p50 ms: {stages}")
-    node = results.get('node')
-    problem = _failed(node)
-    if problem:
-        lines.append(f'Node through DDS {problem}')
-    else:
+    for key in ('node', 'node_hd'):
+        node = results.get(key)
+        if key == 'node_hd' and node is None:
+            continue  # results of a run before the HD node stage
+        problem = _failed(node)
+        if problem:
+            lines.append(f'Node through DDS ({key}) {problem}')
+            continue
         for rate in node['rates']:
             lines.append(f"Node through DDS {node['width']}x{node['height']} "
                          f"({node['backend']}): published {rate['publish_hz']:g} Hz for "

@@ -156,16 +156,19 @@ def summary_lines(results: Mapping[str, Any]) -> list[str]:
                      f"{_number(pipeline.get('overlapped_fps'))} fps overlapped, "
                      f"{_number(pipeline['fps'])} serial; detector backend "
                      f"{pipeline.get('backend', '?')}", '-'])
-    node = results.get('node')
-    if _problem(node):
-        rows.append(['node through DDS', _problem(node) or '', ''])
-    else:
+    for key in ('node', 'node_hd'):
+        node = results.get(key)
+        if key == 'node_hd' and node is None:
+            continue  # results of a run before the HD node stage
+        if _problem(node):
+            rows.append([f'node through DDS ({key})', _problem(node) or '', ''])
+            continue
         for rate in node['rates']:
-            rows.append([f"node through DDS, {node['width']}x{node['height']} at "
-                         f"{rate['publish_hz']:g} Hz: frames answered per second",
-                         f"{_number(rate['output_fps'])} fps, "
-                         f"{rate['dropped']} of {rate['published']} unanswered; detector "
-                         f"backend {node.get('backend') or '?'}", '-'])
+                rows.append([f"node through DDS, {node['width']}x{node['height']} at "
+                             f"{rate['publish_hz']:g} Hz: frames answered per second",
+                             f"{_number(rate['output_fps'])} fps, "
+                             f"{rate['dropped']} of {rate['published']} unanswered; detector "
+                             f"backend {node.get('backend') or '?'}", '-'])
     rows += summary_rows(results)
     lines += _table(['benchmark', 'ours', 'peers'], rows, right_aligned_from=3)
     if isinstance(classifier, Mapping) and classifier.get('crops_seen_in_training'):
@@ -304,9 +307,13 @@ def pipeline_lines(pipeline: Mapping[str, Any]) -> list[str]:
     return lines
 
 
-def node_lines(node: Mapping[str, Any]) -> list[str]:
-    """The node table: one row per publishing rate."""
-    lines = ['## Node through DDS', '',
+#: The heading of the node stage fed 1280x720 frames (``run_all_stages.node_hd_stage``).
+HD_NODE_TITLE = 'Node through DDS, an HD camera'
+
+
+def node_lines(node: Mapping[str, Any], title: str = 'Node through DDS') -> list[str]:
+    """The node table under ``title``: one row per publishing rate."""
+    lines = [f'## {title}', '',
              f"The installed `speed_sign_detector` fed {node['width']}x{node['height']} "
              f"frames over DDS (detector backend {backend_phrase(node)}).", '']
     lines += _table(['published Hz', 'seconds', 'fps answered', 'unanswered',
@@ -352,8 +359,12 @@ def render_results_markdown(results: Mapping[str, Any]) -> str:
     sections = (('detector', 'Detector', detector_lines),
                 ('classifier', 'Classifier', classifier_lines),
                 ('pipeline', 'Pipeline', pipeline_lines),
-                ('node', 'Node through DDS', node_lines))
+                ('node', 'Node through DDS', node_lines),
+                ('node_hd', HD_NODE_TITLE,
+                 lambda node: node_lines(node, HD_NODE_TITLE)))
     for key, title, render in sections:
+        if key == 'node_hd' and key not in results:
+            continue  # results of a run before the HD node stage
         lines.append('')
         problem = _problem(results.get(key))
         lines += [f'## {title}', '', f'{problem[0].upper()}{problem[1:]}.'] if problem \

@@ -96,6 +96,8 @@ class BenchSettings:
         node_seconds: seconds the node is fed at each rate (0 = node not run).
         node_rates_hz: publishing rates of the node stage, run in order (one it can keep
             up with: latency without queueing; 30 Hz: throughput).
+        node_hd_rates_hz: publishing rates of the second node stage, fed 1280x720 frames
+            (an HD camera, detected at the working width; empty = not run).
         pipeline_params: ROS parameter file the pipeline and classifier stages load
             (the node's); None = PipelineConfig() defaults.
         classifier_config: overrides the parameter file's classifier config (tests).
@@ -120,6 +122,7 @@ class BenchSettings:
     pipeline_frames: int = 90
     node_seconds: float = 8.0
     node_rates_hz: tuple[float, ...] = (10.0, 30.0)
+    node_hd_rates_hz: tuple[float, ...] = (30.0,)
     pipeline_params: Path | None = bench_inputs.PARAMS_FILE
     classifier_config: ClassifierConfig | None = None
     bank_cache: Path = BANK_CACHE
@@ -433,7 +436,19 @@ def pipeline_stage(settings: BenchSettings) -> dict[str, object]:
 
 
 def node_stage(settings: BenchSettings) -> dict[str, object]:
-    """The node through DDS (``bench_node.main``) at each of ``node_rates_hz``.
+    """The node through DDS (``bench_node.main``), 640x480 frames at each of
+    ``node_rates_hz``."""
+    return _node_through_dds(settings, 640, 480, settings.node_rates_hz)
+
+
+def node_hd_stage(settings: BenchSettings) -> dict[str, object]:
+    """The node through DDS fed 1280x720 frames at each of ``node_hd_rates_hz``."""
+    return _node_through_dds(settings, 1280, 720, settings.node_hd_rates_hz)
+
+
+def _node_through_dds(settings: BenchSettings, width: int, height: int,
+                      rates_hz: tuple[float, ...]) -> dict[str, object]:
+    """``bench_node.main`` on ``width`` x ``height`` frames at each rate in ``rates_hz``.
 
     The node gets, after its own parameter file, ``node_params.yaml`` (in ``out_dir``)
     holding the pipeline stage's config, so node and pipeline run the same settings.
@@ -447,7 +462,8 @@ def node_stage(settings: BenchSettings) -> dict[str, object]:
     params_file.write_text(yaml.safe_dump(
         {NODE_NAME: {
             'ros__parameters': to_parameters(pipeline_config(settings))}}))
-    argv = ['--rates', *(f'{rate:g}' for rate in settings.node_rates_hz),
+    argv = ['--rates', *(f'{rate:g}' for rate in rates_hz),
+            '--width', str(width), '--height', str(height),
             '--seconds', f'{settings.node_seconds:g}',
             '--frames', '60', '--domain-id', str(NODE_DOMAIN_ID),
             '--bank-cache', str(settings.bank_cache),

@@ -254,6 +254,29 @@ def test_a_smoke_run_and_a_failed_stage_say_so(markdown: ModuleType) -> None:
     assert table_rows(parts['Detector'])  # the stages that ran keep their tables
 
 
+def test_the_hd_node_stage_gets_its_own_section_and_summary_row(
+        markdown: ModuleType) -> None:
+    """The node fed 1280x720 frames is reported beside the 640x480 one; a run saved
+    before that stage existed renders as before."""
+    results = copy.deepcopy(fake_results())
+    results['node_hd'] = copy.deepcopy(results['node'])
+    results['node_hd'].update(width=1280, height=720)
+    results['node_hd']['rates'] = [dict(results['node']['rates'][-1], output_fps=28.6,
+                                        dropped=14, published=240)]
+    text = markdown.render_results_markdown(results)
+    parts = sections(text)
+    hd_rows = table_rows(parts[markdown.HD_NODE_TITLE])
+    assert hd_rows[-1][2:4] == ['28.6', '14 of 240']
+    summary = [row for row in table_rows(parts['Summary']) if row[0].startswith('node')]
+    assert any(row[0].startswith('node through DDS, 1280x720') and
+               row[1].startswith('28.6 fps, 14 of 240 unanswered') for row in summary)
+    results['node_hd'] = {'error': 'SpeedSignError: the node did not start'}
+    assert 'the node did not start' in sections(
+        markdown.render_results_markdown(results))[markdown.HD_NODE_TITLE]
+    del results['node_hd']
+    assert markdown.HD_NODE_TITLE not in markdown.render_results_markdown(results)
+
+
 def test_no_run_date_in_the_report(markdown: ModuleType) -> None:
     """The report holds one run's figures, not when it ran (results.json keeps that)."""
     results = fake_results()
