@@ -204,10 +204,8 @@ def format_table(results: Mapping[str, Any]) -> str:
                      f"overlapping recognition (the node's default); latency p50 "
                      f"{_number(pipeline['latency_p50_ms'])} ms, p95 "
                      f"{_number(pipeline['latency_p95_ms'])} ms; stage p50 ms: {stages}")
-    for key in ('node', 'node_hd'):
-        node = results.get(key)
-        if key == 'node_hd' and node is None:
-            continue  # results of a run before the HD node stage
+    from results_markdown import node_stage_results  # a sibling script of bench/
+    for key, node in node_stage_results(results):
         problem = _failed(node)
         if problem:
             lines.append(f'Node through DDS ({key}) {problem}')

@@ -11,6 +11,7 @@ rendered designs, soak) follow, each with its own command and host
 """
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -18,6 +19,19 @@ from typing import Any
 from long_runs_markdown import long_run_lines, summary_rows
 from markdown_tables import number as _number
 from markdown_tables import table as _table
+
+#: The heading of the node stage fed 1280x720 frames (``run_all_stages.node_hd_stage``).
+HD_NODE_TITLE = 'Node through DDS, an HD camera'
+#: The node stages of a run, by results key: their section headings, in report order.
+NODE_STAGE_TITLES = {'node': 'Node through DDS', 'node_hd': HD_NODE_TITLE}
+
+
+def node_stage_results(results: Mapping[str, Any]) -> list[tuple[str, Any]]:
+    """``(key, section)`` of each node stage the run reports, in report order: the
+    640x480 stage always (missing or failed included), the HD stage where the run has
+    it (a run saved before that stage existed has none)."""
+    return [(key, results.get(key)) for key in NODE_STAGE_TITLES
+            if key == 'node' or key in results]
 
 #: Labels of the detector methods (the keys of results['detector']['sizes'][...]['methods']).
 METHOD_LABELS: dict[str, str] = {
@@ -156,10 +170,7 @@ def summary_lines(results: Mapping[str, Any]) -> list[str]:
                      f"{_number(pipeline.get('overlapped_fps'))} fps overlapped, "
                      f"{_number(pipeline['fps'])} serial; detector backend "
                      f"{pipeline.get('backend', '?')}", '-'])
-    for key in ('node', 'node_hd'):
-        node = results.get(key)
-        if key == 'node_hd' and node is None:
-            continue  # results of a run before the HD node stage
+    for key, node in node_stage_results(results):
         if _problem(node):
             rows.append([f'node through DDS ({key})', _problem(node) or '', ''])
             continue
@@ -307,10 +318,6 @@ def pipeline_lines(pipeline: Mapping[str, Any]) -> list[str]:
     return lines
 
 
-#: The heading of the node stage fed 1280x720 frames (``run_all_stages.node_hd_stage``).
-HD_NODE_TITLE = 'Node through DDS, an HD camera'
-
-
 def node_lines(node: Mapping[str, Any], title: str = 'Node through DDS') -> list[str]:
     """The node table under ``title``: one row per publishing rate."""
     lines = [f'## {title}', '',
@@ -356,15 +363,13 @@ def render_results_markdown(results: Mapping[str, Any]) -> str:
     if results.get('quick'):
         lines += [SMOKE_NOTE, '']
     lines += summary_lines(results)
-    sections = (('detector', 'Detector', detector_lines),
+    sections = [('detector', 'Detector', detector_lines),
                 ('classifier', 'Classifier', classifier_lines),
-                ('pipeline', 'Pipeline', pipeline_lines),
-                ('node', 'Node through DDS', node_lines),
-                ('node_hd', HD_NODE_TITLE,
-                 lambda node: node_lines(node, HD_NODE_TITLE)))
+                ('pipeline', 'Pipeline', pipeline_lines)]
+    sections += [(key, NODE_STAGE_TITLES[key],
+                  functools.partial(node_lines, title=NODE_STAGE_TITLES[key]))
+                 for key, _ in node_stage_results(results)]
     for key, title, render in sections:
-        if key == 'node_hd' and key not in results:
-            continue  # results of a run before the HD node stage
         lines.append('')
         problem = _problem(results.get(key))
         lines += [f'## {title}', '', f'{problem[0].upper()}{problem[1:]}.'] if problem \
