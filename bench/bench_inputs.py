@@ -6,6 +6,9 @@ GPU machine, say); ``bench_node.py``, which needs rclpy, takes them from here to
 """
 from __future__ import annotations
 
+import os
+import shutil
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +16,8 @@ import numpy as np
 from speed_sign_detector.synthetic import DriveConfig, SyntheticDrive
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
+#: The data the benchmarks read (see ../shared/data/README).
+DATA_DIR = PROJECT_ROOT.parent / 'shared' / 'data'
 #: The node's parameter file: the settings every stage of the benchmark runs with.
 PARAMS_FILE = PROJECT_ROOT / 'config' / 'speed_sign_detector.yaml'
 #: Fast DDS profile for 640x480 and larger images over UDP (see the README).
@@ -27,3 +32,20 @@ def drive_frames(width: int, height: int, count: int, seed: int = 0) -> list[np.
     drive = SyntheticDrive(DriveConfig(seed=seed, width_px=width, height_px=height,
                                        duration_s=count / 30.0 + 1.0, fps=30.0))
     return [drive.frame(index).bgr for index in range(count)]
+
+
+class MissingExecutableError(Exception):
+    """A console script of the package is not installed."""
+
+
+def installed_executable(name: str) -> str:
+    """The path of console script ``name`` (beside this interpreter, else on PATH).
+
+    Raises:
+        MissingExecutableError: when it is not installed.
+    """
+    found = shutil.which(name, path=os.pathsep.join(
+        [str(Path(sys.executable).parent), os.environ.get('PATH', '')]))
+    if found is None:
+        raise MissingExecutableError(f'{name} is not installed (pip install -e .)')
+    return found

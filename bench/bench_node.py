@@ -53,7 +53,13 @@ from rclpy.qos import (
 from sensor_msgs.msg import Image, PointCloud2
 from std_msgs.msg import Header, UInt16
 
-from bench_inputs import DDS_PROFILE, PARAMS_FILE, drive_frames
+from bench_inputs import (
+    DDS_PROFILE,
+    PARAMS_FILE,
+    MissingExecutableError,
+    drive_frames,
+    installed_executable,
+)
 from speed_sign_detector.ros.messages import image_message
 TARGET_FPS = 30.0
 TARGET_RSS_MB = 400.0
@@ -204,19 +210,6 @@ def add_node_arguments(parser: argparse.ArgumentParser, domain_id: int) -> None:
     parser.add_argument('--json', action='store_true', help='print one JSON object last')
 
 
-def installed_executable(name: str) -> str:
-    """The path of console script ``name`` (beside this interpreter, else on PATH).
-
-    Raises:
-        NodeBenchError: when it is not installed.
-    """
-    found = shutil.which(name, path=os.pathsep.join(
-        [str(Path(sys.executable).parent), os.environ.get('PATH', '')]))
-    if found is None:
-        raise NodeBenchError(f'{name} is not installed (pip install -e .)')
-    return found
-
-
 ClientType = TypeVar('ClientType', bound=BenchClient)
 
 
@@ -248,7 +241,11 @@ def node_and_client(args: argparse.Namespace, make_client: Callable[[], ClientTy
         os.environ['FASTRTPS_DEFAULT_PROFILES_FILE'] = args.dds_profile
     environment = dict(os.environ, **(node_environment or {}),
                        ROS_DOMAIN_ID=str(args.domain_id))
-    command = [installed_executable('speed_sign_detector'), '--ros-args', '--params-file',
+    try:
+        executable = installed_executable('speed_sign_detector')
+    except MissingExecutableError as err:
+        raise NodeBenchError(str(err)) from err
+    command = [executable, '--ros-args', '--params-file',
                str(PARAMS_FILE), '-p', f'classifier.cache_dir:={args.bank_cache}',
                *args.node_arg]
     node_process = subprocess.Popen(

@@ -56,11 +56,11 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CompressedImage, PointCloud2
 
+from bench_inputs import MissingExecutableError, installed_executable
 from bench_node import (
     BenchClient,
     NodeBenchError,
     add_node_arguments,
-    installed_executable,
     node_and_client,
     resident_mb,
 )
@@ -134,7 +134,11 @@ class LoopingDrive:
 def make_drive(out: Path, args: argparse.Namespace) -> Path:
     """Write the synthetic drive of ``args`` (size, length, seed, JPEG or raw) to the bag
     ``out`` with the installed ``speed_sign_synth``; returns ``out``."""
-    command = [installed_executable('speed_sign_synth'), str(out),
+    try:
+        executable = installed_executable('speed_sign_synth')
+    except MissingExecutableError as err:
+        raise SoakError(str(err)) from err
+    command = [executable, str(out),
                '--duration', f'{args.loop_seconds:g}', '--seed', str(args.seed),
                '--width', str(args.width), '--height', str(args.height), '-q',
                *([] if args.raw else ['--compressed'])]

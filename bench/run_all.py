@@ -34,7 +34,10 @@ classifier (GTSRB crops, ``../shared/data/gtsrb-dev``)
 
 end to end
     ``Pipeline`` (the node's parameter file, classifier banks cached) on 640x480 frames of
-    a synthetic drive: frames per second and per-frame latency; and the node through DDS
+    a synthetic drive: frames per second and per-frame latency; ``speed_sign_eval bag``
+    (the installed executable) at 640x480, 1280x720 and 1920x1080 on a synthetic drive
+    (fps, stage times) and on approach sequences made from the GTSDB scenes (signs
+    recognized, wrong limits), ``bench_camera_sizes.py``; and the node through DDS
     (``bench_node.main``: the installed executable, 640x480 frames published at 10 Hz,
     then 30 Hz; then 1280x720 frames at 30 Hz).
 
@@ -84,6 +87,7 @@ from host_record import machine_record  # noqa: E402
 from run_all_stages import (  # noqa: E402
     DATA_DIR,
     BenchSettings,
+    camera_sizes_stage,
     classifier_stage,
     detector_stage,
     log,
@@ -120,7 +124,8 @@ PAPER_FIGURES: dict[str, dict[str, object]] = {
 QUICK: dict[str, object] = {
     'detector_frames': 3, 'large_frames': 1, 'sweep_frames': 1, 'max_radii_px': (20.0, 40.0),
     'gradient_thresholds': (40.0, 100.0), 'crop_every': 1500, 'speed_frames': 2,
-    'pipeline_frames': 6, 'node_seconds': 2.0}
+    'pipeline_frames': 6, 'camera_drive_s': 1.0, 'approach_sequences': 2,
+    'node_seconds': 2.0}
 
 
 # ----------------------------------------------------------------------------- driver
@@ -153,6 +158,10 @@ def run_benchmark(settings: BenchSettings,
     stages: list[tuple[str, Stage]] = [('detector', detector_stage),
                                        ('classifier', classifier_stage),
                                        ('pipeline', pipeline_stage)]
+    if settings.camera_sizes:
+        stages.append(('camera_sizes', camera_sizes_stage))
+    else:
+        results['camera_sizes'] = {'skipped': 'no camera sizes'}
     if settings.node_seconds > 0:
         stages.append(('node', node_stage))
         if settings.node_hd_rates_hz:

@@ -12,6 +12,7 @@ import contextlib
 import dataclasses
 import io
 import json
+import shutil
 import statistics
 import sys
 import tempfile
@@ -27,9 +28,11 @@ use_one_blas_thread()  # as the node does, before numpy loads its BLAS: the node
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
+import bench_camera_sizes  # noqa: E402
 import bench_classifier  # noqa: E402
 import bench_detector  # noqa: E402
 import bench_inputs  # noqa: E402
+from bench_inputs import DATA_DIR  # noqa: E402
 
 from speed_sign_detector.config import (  # noqa: E402
     ClassifierConfig,
@@ -55,7 +58,6 @@ from speed_sign_detector.scene_truth import SceneSign, read_gtsdb_truth  # noqa:
 from speed_sign_detector.tools.eval_scenes import SIZE_BINS_PX  # noqa: E402
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
-DATA_DIR = PROJECT_ROOT.parent / 'shared' / 'data'
 #: Where the classifier's filter banks are cached; bench_node's default, so the node
 #: started by the node stage loads the banks the classifier stage built.
 BANK_CACHE = Path(tempfile.gettempdir()) / 'speed_sign_detector_banks'
@@ -93,6 +95,10 @@ class BenchSettings:
         crop_every: GTSRB crops used: every Nth of labels.csv (1 = all 4,400).
         speed_frames: synthetic 640x480 frames of 7 candidates timed for the classifier.
         pipeline_frames: synthetic drive frames run through the Pipeline at 640x480.
+        camera_sizes: the camera sizes of the ``eval bag`` stage, (width, height) px
+            (empty = stage not run).
+        camera_drive_s: length of its synthetic drive at each size, seconds.
+        approach_sequences: its approach sequences per size (0 = none made).
         node_seconds: seconds the node is fed at each rate (0 = node not run).
         node_rates_hz: publishing rates of the node stage, run in order (one it can keep
             up with: latency without queueing; 30 Hz: throughput).
@@ -120,6 +126,9 @@ class BenchSettings:
     crop_every: int = 1
     speed_frames: int = 10
     pipeline_frames: int = 90
+    camera_sizes: tuple[tuple[int, int], ...] = bench_camera_sizes.CAMERA_SIZES
+    camera_drive_s: float = 4.0
+    approach_sequences: int = 40
     node_seconds: float = 8.0
     node_rates_hz: tuple[float, ...] = (10.0, 30.0)
     node_hd_rates_hz: tuple[float, ...] = (30.0,)
@@ -433,6 +442,21 @@ def pipeline_stage(settings: BenchSettings) -> dict[str, object]:
     log(f'pipeline: {result["fps"]:.1f} fps serial, {result["overlapped_fps"]:.1f} fps '
          f'overlapped, p50 {result["latency_p50_ms"]:.0f} ms; detector {backend_choice}')
     return result
+
+
+def camera_sizes_stage(settings: BenchSettings) -> dict[str, object]:
+    """``speed_sign_eval bag`` at each camera size: synthetic drives (fps) and approach
+    sequences from the GTSDB scenes (signs recognized), ``bench_camera_sizes``; the bags
+    are written under ``out_dir/camera_sizes`` and removed afterwards."""
+    work_dir = settings.out_dir / 'camera_sizes'
+    shutil.rmtree(work_dir, ignore_errors=True)   # speed_sign_synth makes only new bags
+    try:   # a failing tool raises CameraSizeBenchError, a RuntimeError: the stage fails
+        return bench_camera_sizes.measure_camera_sizes(bench_camera_sizes.CameraSizeSettings(
+            work_dir=work_dir, sizes=settings.camera_sizes, gtsdb_dir=settings.gtsdb_dir,
+            drive_seconds=settings.camera_drive_s,
+            approach_sequences=settings.approach_sequences))
+    finally:
+        shutil.rmtree(work_dir, ignore_errors=True)
 
 
 def node_stage(settings: BenchSettings) -> dict[str, object]:

@@ -277,6 +277,49 @@ def test_the_hd_node_stage_gets_its_own_section_and_summary_row(
     assert markdown.HD_NODE_TITLE not in markdown.render_results_markdown(results)
 
 
+def _camera_size_row(width: int, height: int, fps: float, recognized: int) -> dict[str, Any]:
+    name = f'{width}x{height}'
+    return {'width': width, 'height': height,
+            'drive': {'frames': 120, 'fps': fps, 'latency_ms_p50': 1000.0 / fps + 0.25,
+                      'latency_ms_p95': 2000.0 / fps, 'backend_choice': 'auto: cpu',
+                      'stage_ms_p50': {'detect': 300.0 / fps, 'classify': 7.75},
+                      'recall': 1.0, 'wrong_limits': 0, 'signs': 3, 'recognized': 3,
+                      'made_by': f'speed_sign_synth drive_{name} --width {width}',
+                      'command': f'speed_sign_eval bag drive_{name} --json'},
+            'approach': {'signs': 51, 'recognized': recognized, 'recall': recognized / 51,
+                         'wrong_limits': 0, 'made_by': f'speed_sign_synth approach {name}',
+                         'command': f'speed_sign_eval bag approach_{name} --json'}}
+
+
+def test_eval_bag_at_each_camera_size_has_its_section_and_summary_row(
+        markdown: ModuleType) -> None:
+    """fps per camera size against issue 33's targets, the approach signs recognized, the
+    commands; a failed stage says so; a run saved before the stage renders as before."""
+    results = copy.deepcopy(fake_results())
+    results['camera_sizes'] = {
+        'sizes': {'640x480': _camera_size_row(640, 480, 52.5, 40),
+                  '1920x1080': _camera_size_row(1920, 1080, 23.5, 43)},
+        'drive_fps_targets': {'640x480': 50.0, '1920x1080': 25.0},
+        'drive_seconds': 4.0, 'drive_seed': 5, 'approach_sequences': 40}
+    parts = sections(markdown.render_results_markdown(results))
+    section = parts[markdown.CAMERA_SIZES_TITLE]
+    rows = table_rows(section)
+    assert rows[1][:2] == ['640x480', '52.5 (target 50: met)']
+    assert rows[2][:2] == ['1920x1080', '23.5 (target 25: NOT met)']
+    assert rows[2][4:] == ['12.8', '7.8', '1.000, 0 wrong', '43 of 51 (0.843), 0 wrong']
+    assert '`speed_sign_synth drive_1920x1080 --width 1920` + ' \
+           '`speed_sign_eval bag drive_1920x1080 --json`' in section
+    summary = [row for row in table_rows(parts['Summary']) if row[0].startswith('speed_sign')]
+    assert summary == [['speed_sign_eval bag at 640x480 / 1920x1080: fps on a synthetic drive; '
+                        'approach sequences (real pixels) recognized',
+                        '52.5 / 23.5 fps; recognized 40 / 43; 0 wrong limits in all', '-']]
+    results['camera_sizes'] = {'error': 'CameraSizeBenchError: speed_sign_eval exited with 1'}
+    assert 'exited with 1' in sections(
+        markdown.render_results_markdown(results))[markdown.CAMERA_SIZES_TITLE]
+    del results['camera_sizes']
+    assert markdown.CAMERA_SIZES_TITLE not in markdown.render_results_markdown(results)
+
+
 def test_no_run_date_in_the_report(markdown: ModuleType) -> None:
     """The report holds one run's figures, not when it ran (results.json keeps that)."""
     results = fake_results()

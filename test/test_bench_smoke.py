@@ -53,7 +53,8 @@ def results(run_all, shared_data_dir: Path, tmp_path_factory: pytest.TempPathFac
         gtsrb_dir=shared_data_dir / 'gtsrb-dev', detector_frames=2, large_frames=1,
         detector_sizes=('640x480', '816x480'), sweep_frames=1, max_radii_px=(20.0, 40.0),
         gradient_thresholds=(40.0, 120.0), crop_every=1500, speed_frames=1,
-        pipeline_frames=3, node_seconds=0.0, pipeline_params=None,
+        pipeline_frames=3, camera_sizes=((320, 240),), camera_drive_s=1.0,
+        approach_sequences=1, node_seconds=0.0, pipeline_params=None,
         classifier_config=ClassifierConfig(max_radius_px=24.0),
         bank_cache=out / 'banks', quick=True, results_md=out / 'report' / 'RESULTS.md',
         command=('test',))
@@ -134,6 +135,27 @@ def test_classifier_and_pipeline_sections(results: dict) -> None:
     assert {'detect', 'classify', 'track', 'total'} <= set(pipeline['stage_p50_ms'])
     assert pipeline['backend'] in {'gl', 'cpu', 'numpy'}
     assert pipeline['backend_choice']  # how the backend was chosen, in words
+
+
+def test_eval_bag_at_each_camera_size(results: dict) -> None:
+    """The installed speed_sign_synth and speed_sign_eval ran on a drive and an approach
+    bag of the camera size; the bags are gone afterwards; RESULTS.md has the section."""
+    camera_sizes = results['returned']['camera_sizes']
+    assert 'error' not in camera_sizes, camera_sizes
+    row = camera_sizes['sizes']['320x240']
+    drive, approach = row['drive'], row['approach']
+    assert drive['frames'] == 30 and drive['fps'] > 0
+    assert {'detect', 'classify', 'total'} <= set(drive['stage_ms_p50'])
+    assert drive['made_by'] == ('speed_sign_synth drive_320x240 --truth drive_320x240.csv '
+                                '--duration 1 --seed 5 --compressed --width 320 --height 240')
+    assert drive['command'] == 'speed_sign_eval bag drive_320x240 --truth drive_320x240.csv --json'
+    assert approach['made_by'].startswith('speed_sign_synth approach ')
+    assert approach['signs'] >= 1 and 0 <= approach['recognized'] <= approach['signs']
+    assert approach['wrong_limits'] >= 0
+    assert not (results['out'] / 'camera_sizes').exists()
+    report = (results['out'] / 'report' / 'RESULTS.md').read_text()
+    section = report.split('## speed_sign_eval bag at each camera size')[1].split('\n## ')[0]
+    assert '| 320x240 |' in section and drive['made_by'] in section
 
 
 def test_run_all_without_the_node_stage_needs_no_rclpy() -> None:
