@@ -360,6 +360,8 @@ def main(argv: list[str] | None = None) -> int:
     long_runs = load_long_runs(args)
     if long_runs:
         results.update(long_runs)
+        results['long_runs_merged_by'] = ['python', 'bench/report.py',
+                                          *(sys.argv[1:] if argv is None else argv)]
         write_json(results, args.results)
         print(f"merged {', '.join(long_runs)} into {args.results}", file=sys.stderr)
     print(format_table(results))

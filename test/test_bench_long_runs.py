@@ -346,6 +346,8 @@ def test_report_merges_the_files_into_results_json(tmp_path: Path,
     assert merged['soak']['frames']['unaccounted'] == 2
     text = written.read_text()
     assert text == markdown.render_results_markdown(merged)
+    assert (f"the long runs' files merged into it afterwards by `python bench/report.py "
+            f"{saved} --out") in text.split('\n## ')[0]   # in the note before the summary
     headings = list(sections(text))
     assert headings.index('Node through DDS') < headings.index(FOLDS_HEADING) \
         < headings.index(HOLDOUT_HEADING) < headings.index('Rendered designs') \
