@@ -52,7 +52,8 @@ bank: $(INSTALLED)
 ## their command and host: 5 folds by track (and by scene, with the scene folds' approach
 ## sequences and boxes), leave one value out, the rendered sign designs; make bench adds them
 ## to bench/RESULTS.md. Each is its own target; `make -j2 validate` runs them side by side
-## in about 1.5 h on 2 cores (folds 88 min beside leave-one-value-out's 75 min; designs 22 s)
+## in 40 min to 1.5 h on 2 cores, as fast as the host is that day (folds 36-88 min beside
+## leave-one-value-out's 29-75 min; designs under a minute)
 .PHONY: validate validate-folds validate-value-holdout validate-designs
 validate: validate-folds validate-value-holdout validate-designs
 validate-folds: $(INSTALLED)

@@ -61,7 +61,8 @@ class CameraSizeSettings:
     """What ``measure_camera_sizes`` runs.
 
     Attributes:
-        work_dir: folder for the bags and truth files (created; must be empty or absent).
+        work_dir: folder for the bags and truth files (created where absent; it must not
+            hold bags of the same names: ``speed_sign_synth`` refuses to overwrite one).
         sizes: camera sizes, (width, height) in pixels, in report order.
         gtsdb_dir: GTSDB-format scene folder for the approach sequences; None = none made.
         drive_seconds: length of each synthetic drive, seconds (30 frames/s).

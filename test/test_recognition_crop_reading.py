@@ -16,6 +16,8 @@ from speed_sign_detector.recognition.candidate_evidence import CorrelationEviden
 from speed_sign_detector.recognition.classifier import Classifier
 from speed_sign_detector.recognition.crop_framing import auto_framings, crop_sign_radius
 from speed_sign_detector.recognition.crop_reading import crop_positions, framed_search_config
+from speed_sign_detector.recognition.second_opinion import SecondOpinion
+from speed_sign_detector.recognition.sign_designs import design_crop
 from speed_sign_detector.training.bank_training import locate_signs
 
 #: gtsrb-dev crops (class folder 00003 = 60 km/h, 00007 = 100 km/h) where the free search
@@ -168,3 +170,23 @@ def test_the_renderings_alone_keep_the_frames_gate(shared_data_dir: Path,
     for name in sorted(WEAK_RING_CROPS):
         assert not isinstance(rendered.crop_evidence(_crop(shared_data_dir, name)),
                               CorrelationEvidence)
+
+
+def test_crops_read_rendered_only_leaders_with_their_own_floor(
+        classifier: Classifier, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A crop's decision hands the second opinion ``crop_rendered_only_min_score``; a
+    frame's candidate keeps the form's floor (``None``), which keeps clutter out."""
+    floors: list[float | None] = []
+    choose = SecondOpinion.choose
+
+    def spy(self: SecondOpinion, *args: object, **kwargs: object) -> str | None:
+        floors.append(kwargs.get('rendered_only_floor', args[6] if len(args) > 6 else None))
+        return choose(self, *args, **kwargs)
+
+    monkeypatch.setattr(SecondOpinion, 'choose', spy)
+    crop = design_crop('40', 'painted', 44, np.random.default_rng(3))
+    evidence = classifier.crop_evidence(crop)
+    assert isinstance(evidence, CorrelationEvidence)
+    classifier.decide(crop, evidence, crop=True)
+    classifier.decide(crop, evidence, crop=False)
+    assert floors == [classifier.config.crop_rendered_only_min_score, None]

@@ -494,6 +494,24 @@ def test_second_opinion_chooses_only_among_ranked_real_labels() -> None:
     assert opinion.choose(scores, [], 2, 0.2) is None
 
 
+def test_a_crop_may_lower_the_floor_of_a_rendered_only_leader_the_model_reads_too() -> None:
+    """``rendered_only_floor`` (a crop's ``crop_rendered_only_min_score``) lowers the least
+    score at which the model's own best label, a leader it knows from renderings only,
+    stands; it never raises the form's floor, and a leader the model does not read first
+    is judged as before."""
+    opinion = _opinion(('30', '70', '80', '130', 'other_sign'), ('30', '70', '80', 'other_sign'))
+    weakly_130 = np.asarray([-0.9, -0.9, -0.9, RENDERED_ONLY_MIN_SCORE - 0.2, -0.9])
+    assert opinion.choose(weakly_130, ['130', '30'], 2, 0.2) is None
+    assert opinion.choose(weakly_130, ['130', '30'], 2, 0.2,
+                          rendered_only_floor=RENDERED_ONLY_MIN_SCORE - 0.3) == '130'
+    assert opinion.choose(weakly_130, ['130', '30'], 2, 0.2,
+                          rendered_only_floor=RENDERED_ONLY_MIN_SCORE - 0.1) is None
+    clearly_130 = weakly_130 + 0.3                     # above the form's floor
+    assert opinion.choose(clearly_130, ['130', '30'], 2, 0.2, rendered_only_floor=0.9) == '130'
+    far_below = np.asarray([1.0, 0.2, -0.5, -0.95, -1.0])   # the model reads 30: unchanged
+    assert opinion.choose(far_below, ['130', '30'], 2, 0.2, rendered_only_floor=-1.0) is None
+
+
 def test_second_opinion_withholds_a_limit_close_to_one_it_cannot_vouch_against() -> None:
     """A limit the model knows from renderings only, ranked by the correlation within
     UNSEEN_RUNNER_UP_PSR of its leading limit, withholds the answer."""

@@ -405,7 +405,8 @@ class Classifier:
                                     self.trained_bank.candidates, min_lead,
                                     config.second_opinion_overrule_lead,
                                     [(name, psr) for name, (_, psr) in
-                                     zip(labels, evidence.ranked)])
+                                     zip(labels, evidence.ranked)],
+                                    config.crop_rendered_only_min_score if crop else None)
             withhold = choice is None
             label = choice if choice is not None else label
         psr = next(p for (_, p), name in zip(evidence.ranked, labels) if name == label)

@@ -21,7 +21,8 @@ value, rank such signs right far more often. Hence:
   :data:`NETWORK_RENDERED_ONLY_MIN_SCORE`, network form), or among its
   :data:`RENDERED_ONLY_MAX_RANK` + 1 best labels within :data:`RENDERED_ONLY_MAX_GAP` of
   its best score, its best label not "other sign"; otherwise the answer is withheld,
-  never turned into another limit.
+  never turned into another limit. A crop frames a sign, so there the floor for the
+  model's own best label is lower (``classifier.crop_rendered_only_min_score``).
 - Where the correlation finds such a class nearly as well as its leading limit (within
   :data:`UNSEEN_RUNNER_UP_PSR`), the model cannot tell the two apart: withheld.
 - Overruling the correlation's leading limit with another limit where either is known
@@ -168,7 +169,8 @@ class SecondOpinion:
 
     def choose(self, scores: np.ndarray, ranked_labels: Sequence[str], candidates: int,
                min_lead: float, overrule_lead: float = 0.0,
-               correlation: Sequence[tuple[str, float]] = ()) -> str | None:
+               correlation: Sequence[tuple[str, float]] = (),
+               rendered_only_floor: float | None = None) -> str | None:
         """The label to answer for one sign, or ``None`` to withhold.
 
         Args:
@@ -181,6 +183,11 @@ class SecondOpinion:
                 the two disagree on is not published).
             correlation: the correlation filters' (label, PSR) pairs, best first, for the
                 check on limits the model knows from renderings only (none: no check).
+            rendered_only_floor: where lower than the form's floor
+                (:data:`NETWORK_RENDERED_ONLY_MIN_SCORE`, :data:`RENDERED_ONLY_MIN_SCORE`),
+                the least score for a correlation leader known from renderings only that
+                is also the model's best label (a crop, which frames a sign, needs no
+                guard against clutter); ``None``: the form's floor.
 
         Returns:
             One of ``ranked_labels`` or ``None``.
@@ -194,7 +201,7 @@ class SecondOpinion:
         order = np.argsort(-scores)
         leader = distinct[0]
         if leader not in self.real_labels:
-            if self._reads_rendered_only(scores, order, leader):
+            if self._reads_rendered_only(scores, order, leader, rendered_only_floor):
                 return leader
             if leader.isdigit():
                 # a model that never saw this value's real pixels rejects them on weak
@@ -228,15 +235,19 @@ class SecondOpinion:
             return None
         return model_best
 
-    def _reads_rendered_only(self, scores: np.ndarray, order: np.ndarray, label: str) -> bool:
+    def _reads_rendered_only(self, scores: np.ndarray, order: np.ndarray, label: str,
+                             lower_floor: float | None = None) -> bool:
         """Whether the model's ``scores`` let the correlation's answer ``label``, a class
-        it learned from renderings only, stand (see the module's rules)."""
+        it learned from renderings only, stand (see the module's rules; ``lower_floor``:
+        :meth:`choose`'s ``rendered_only_floor``)."""
         if label not in self.labels:
             return False
         index = self.labels.index(label)
         best = int(order[0])
         floor = RENDERED_ONLY_MIN_SCORE if self.form == 'linear' else \
             NETWORK_RENDERED_ONLY_MIN_SCORE
+        if lower_floor is not None:
+            floor = min(floor, lower_floor)
         if best == index:
             return float(scores[index]) >= floor
         rank = int(np.sum(scores > scores[index]))
