@@ -53,7 +53,7 @@ bank: $(INSTALLED)
 ## sequences and boxes), leave one value out, the rendered sign designs; make bench adds them
 ## to bench/RESULTS.md. Each is its own target; `make -j2 validate` runs them side by side
 ## in 40 min to 1.5 h on 2 cores, as fast as the host is that day (folds 36-88 min beside
-## leave-one-value-out's 29-75 min; designs under a minute)
+## leave-one-value-out's 29-75 min, 21 min alone; designs under a minute)
 .PHONY: validate validate-folds validate-value-holdout validate-designs
 validate: validate-folds validate-value-holdout validate-designs
 validate-folds: $(INSTALLED)

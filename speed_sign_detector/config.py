@@ -247,6 +247,13 @@ class ClassifierConfig:
         'one value out of gtsrb-dev, 0.0 instead of the frames\' 0.3 read 60s right 0.860 '
         'instead of 0.806, 80s 0.866 instead of 0.844, none more wrong.',
         low=-1.0, high=1.0)
+    frame_value_without_crops_min_psr: float = setting(
+        10.0, 'Frames (not crops): the least correlation PSR for answering a limit the bank '
+        'has no real crops of (known from composites of real digits or renderings only: 5, '
+        '10, 40, 90, 110, 130, 140 km/h with gtsrb-dev); on weaker peaks clutter and other '
+        'signs read as 5 or 40 (gtsdb-dev, 5 folds by scene: 5 of the 9 false limits in 466 '
+        'frames, every one under PSR 9.5, went; no limit sign fewer recognized).',
+        low=0.0, high=1000.0)
     max_cut_fraction: float = setting(0.2, 'A sign whose disc reaches beyond the frame '
                                       'border by more than this fraction of its radius is '
                                       'answered "no sign": its digits are cut off.',

@@ -13,6 +13,7 @@ import pytest
 from speed_sign_detector.config import ClassifierConfig, ConfigError, from_parameters
 from speed_sign_detector.labelled_crops import LabelledCrop
 from speed_sign_detector.recognition.candidate_evidence import CorrelationEvidence
+from speed_sign_detector.recognition.classification import LABEL_NO_SIGN
 from speed_sign_detector.recognition.classifier import Classifier
 from speed_sign_detector.recognition.crop_framing import auto_framings, crop_sign_radius
 from speed_sign_detector.recognition.crop_reading import crop_positions, framed_search_config
@@ -190,3 +191,28 @@ def test_crops_read_rendered_only_leaders_with_their_own_floor(
     classifier.decide(crop, evidence, crop=True)
     classifier.decide(crop, evidence, crop=False)
     assert floors == [classifier.config.crop_rendered_only_min_score, None]
+
+
+def test_frames_answer_a_value_without_crops_only_on_a_clear_peak(
+        classifier: Classifier, config: ClassifierConfig) -> None:
+    """In a frame, a limit the bank has no real crops of (130: composites of real digits)
+    needs ``frame_value_without_crops_min_psr``; a crop does not, nor does a value with
+    real crops (30)."""
+    bank = classifier.trained_bank
+    assert bank.second_opinion is not None
+    assert '130' not in bank.second_opinion.labels_with_crops
+    assert '30' in bank.second_opinion.labels_with_crops
+    rng = np.random.default_rng(5)
+    for value in ('130', '30'):
+        crop = design_crop(value, 'painted', 48, rng)
+        evidence = classifier.crop_evidence(crop)
+        assert isinstance(evidence, CorrelationEvidence)
+        peak = evidence.ranked[0][1]
+        lenient = Classifier(dataclasses.replace(config, frame_value_without_crops_min_psr=0.0),
+                             bank)
+        strict = Classifier(dataclasses.replace(
+            config, frame_value_without_crops_min_psr=peak + 1.0), bank)
+        assert lenient.decide(crop, evidence).label == value
+        assert strict.decide(crop, evidence, crop=True).label == value
+        expected = LABEL_NO_SIGN if value == '130' else value
+        assert strict.decide(crop, evidence).label == expected

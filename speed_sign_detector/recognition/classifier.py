@@ -407,6 +407,10 @@ class Classifier:
                                     [(name, psr) for name, (_, psr) in
                                      zip(labels, evidence.ranked)],
                                     config.crop_rendered_only_min_score if crop else None)
+            if (choice is not None and not crop and choice.isdigit()
+                    and choice not in opinion.labels_with_crops
+                    and top_psr < config.frame_value_without_crops_min_psr):
+                choice = None  # in a frame, clutter reads as 5 or 40 on weak peaks
             withhold = choice is None
             label = choice if choice is not None else label
         psr = next(p for (_, p), name in zip(evidence.ranked, labels) if name == label)

@@ -220,7 +220,7 @@ class SecondOpinion:
         allowed = [label for label in distinct[:candidates] if label in self.real_labels]
         if model_best not in allowed or lead < min_lead:
             return None
-        crop_labels = self.real_labels if self.crop_labels is None else self.crop_labels
+        crop_labels = self.labels_with_crops
         if model_best.isdigit() and model_best not in crop_labels \
                 and lead < COMPOSITE_ONLY_ANSWER_LEAD:
             return None  # a value known from composites only needs a clear lead
@@ -234,6 +234,12 @@ class SecondOpinion:
             # correlation read, but does not turn a limit the correlation read into one
             return None
         return model_best
+
+    @property
+    def labels_with_crops(self) -> tuple[str, ...]:
+        """The labels it was trained on real crops (or scene examples) of: the rest it
+        knows from composites of real digits or from renderings only."""
+        return self.real_labels if self.crop_labels is None else self.crop_labels
 
     def _reads_rendered_only(self, scores: np.ndarray, order: np.ndarray, label: str,
                              lower_floor: float | None = None) -> bool:
