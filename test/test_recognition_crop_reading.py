@@ -202,14 +202,14 @@ def test_frames_answer_a_value_without_crops_only_on_a_clear_peak(
     assert bank.second_opinion is not None
     assert '130' not in bank.second_opinion.labels_with_crops
     assert '30' in bank.second_opinion.labels_with_crops
+    lenient = Classifier(dataclasses.replace(config, frame_value_without_crops_min_psr=0.0),
+                         bank)
     rng = np.random.default_rng(5)
     for value in ('130', '30'):
         crop = design_crop(value, 'painted', 48, rng)
         evidence = classifier.crop_evidence(crop)
         assert isinstance(evidence, CorrelationEvidence)
         peak = evidence.ranked[0][1]
-        lenient = Classifier(dataclasses.replace(config, frame_value_without_crops_min_psr=0.0),
-                             bank)
         strict = Classifier(dataclasses.replace(
             config, frame_value_without_crops_min_psr=peak + 1.0), bank)
         assert lenient.decide(crop, evidence).label == value

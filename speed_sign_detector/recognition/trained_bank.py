@@ -79,9 +79,7 @@ def save_trained_bank(path: Path, bank: TrainedBank) -> None:
         opinion = bank.second_opinion
         arrays.update(opinion_labels=np.asarray(opinion.labels),
                       opinion_real_labels=np.asarray(opinion.real_labels),
-                      opinion_crop_labels=np.asarray(
-                          opinion.real_labels if opinion.crop_labels is None
-                          else opinion.crop_labels),
+                      opinion_crop_labels=np.asarray(opinion.labels_with_crops),
                       feature_mean=opinion.feature_mean,
                       feature_scale=opinion.feature_scale,
                       weights=opinion.weights.astype(np.float16), bias=opinion.bias)
