@@ -197,7 +197,7 @@ class ClassifierConfig:
         1.0, 'Least score lead of the second opinion for an answer whose PSR is below '
         'psr_threshold (it needs the bank\'s own min_lead above it).', low=0.0, high=10.0)
     second_opinion_overrule_lead: float = setting(
-        1.0, 'Least score lead of the second opinion for answering a speed limit other than '
+        1.2, 'Least score lead of the second opinion for answering a speed limit other than '
         'the one the correlation filters ranked first; with a weaker lead the answer is '
         'withheld, so that a value the two disagree on is not published.',
         low=0.0, high=10.0)

@@ -23,7 +23,6 @@ from speed_sign_detector.errors import BankFileError, TrainingDataError
 from speed_sign_detector.labelled_crops import read_crop_folder, track_folds
 from speed_sign_detector.recognition.bank_file import load_bank_file, save_bank_file
 from speed_sign_detector.recognition.classifier import (
-    LABEL_END_OF_LIMIT,
     Classifier,
     CorrelationEvidence,
     crop_sign_radius,
@@ -33,16 +32,7 @@ from speed_sign_detector.recognition.crop_framing import (
     padded_fallback_radius,
 )
 from speed_sign_detector.recognition.filter_banks import bank_radii, build_banks
-from speed_sign_detector.recognition.second_opinion import (
-    COMPOSITE_ONLY_ANSWER_LEAD,
-    COMPOSITE_ONLY_OVERRULE_LEAD,
-    END_OF_LIMIT_LABEL,
-    RENDERED_ONLY_MAX_GAP,
-    RENDERED_ONLY_MAX_RANK,
-    RENDERED_ONLY_MIN_SCORE,
-    UNSEEN_RUNNER_UP_PSR,
-    SecondOpinion,
-)
+from speed_sign_detector.recognition.second_opinion import SecondOpinion
 from speed_sign_detector.recognition.sign_features import FEATURE_SIZE
 from speed_sign_detector.recognition.templates import LIMIT_VALUES_KMH, render_sign
 from speed_sign_detector.recognition.trained_bank import (
@@ -443,142 +433,6 @@ def test_design_renderings_join_the_rendered_training_crops() -> None:
     # 'end_of_restrictions' renderings are ends of limits, never 'other_sign'
     crops, kinds = rendered_training_crops(1, np.random.default_rng(0))
     assert 'other_sign' in kinds and kinds.count('end_of_limit') >= 2
-
-
-def _opinion(labels: tuple[str, ...], real: tuple[str, ...]) -> SecondOpinion:
-    size = len(labels)
-    return SecondOpinion(labels, np.zeros(1, np.float32), np.ones(1, np.float32),
-                         np.zeros((1, size), np.float32), np.zeros(size, np.float32), real)
-
-
-def test_second_opinion_chooses_only_among_ranked_real_labels() -> None:
-    opinion = _opinion(('30', '70', '80', '130', 'other_sign'), ('30', '70', '80', 'other_sign'))
-    scores = np.asarray([0.9, 0.2, -0.5, -0.9, -1.0])  # the model reads 30, lead 0.7
-    # it may overrule the correlation's winner with its runner-up ...
-    assert opinion.choose(scores, ['70', '30', '80'], 2, 0.2) == '30'
-    # ... but never picks a label the correlation did not rank among the leaders
-    assert opinion.choose(scores, ['70', '80', '30'], 2, 0.2) is None
-    # a small lead withholds the answer
-    assert opinion.choose(np.asarray([0.9, 0.8, 0.0, 0.0, 0.0]), ['30', '70'], 2, 0.2) is None
-    # a label learned from renderings only is never its choice over a real one
-    rendered_best = np.asarray([0.1, -0.5, -0.5, 0.9, -1.0])
-    assert opinion.choose(rendered_best, ['30', '130'], 2, 0.2) == '30'
-    # the correlation's rendered-only winner stands where the model reads it too, or
-    # ranks it among its best RENDERED_ONLY_MAX_RANK + 1 labels (a model that never saw
-    # that value's real pixels names the nearest value it knows: it cannot vouch
-    # against it); otherwise the answer is withheld, never turned into another limit
-    assert opinion.choose(rendered_best, ['130', '30'], 2, 0.2) == '130'
-    assert RENDERED_ONLY_MAX_RANK == 3 and RENDERED_ONLY_MAX_GAP < 2.0
-    assert opinion.choose(scores, ['130', '30'], 2, 0.2) == '130'       # 4th, 1.8 below
-    assert opinion.choose(scores, ['130', '80', '30'], 2, 0.2) == '130'
-    far_below = np.asarray([1.0, 0.2, -0.5, -0.95, -1.0])               # 1.95 below
-    assert opinion.choose(far_below, ['130', '30'], 2, 0.2) is None
-    fifth = _opinion(('30', '70', '80', '100', '130', 'other_sign'),
-                     ('30', '70', '80', '100', 'other_sign'))
-    assert fifth.choose(np.asarray([0.9, 0.2, -0.3, -0.5, -0.6, -1.0]), ['130', '30'], 2,
-                        0.2) is None                                   # 5th of the model's
-    reads_no_sign = np.asarray([-0.9, -0.9, -0.9, -0.3, 0.9])           # best: other sign
-    assert opinion.choose(reads_no_sign, ['130', '30'], 2, 0.2) is None
-    # a real winner may still be overruled by a real runner-up with a clear lead ...
-    assert opinion.choose(scores, ['70', '30'], 2, 0.2, overrule_lead=0.5) == '30'
-    # ... but a lead under overrule_lead withholds a limit the two disagree on
-    assert opinion.choose(scores, ['70', '30'], 2, 0.2, overrule_lead=0.8) is None
-    # agreeing with the winner needs no more than min_lead
-    assert opinion.choose(scores, ['30', '70'], 2, 0.2, overrule_lead=0.8) == '30'
-    unsure = np.asarray([0.1, 0.0, 0.0, -0.1, 0.2])   # the model reads no limit at all
-    assert opinion.choose(unsure, ['130', '30'], 2, 0.2) is None
-    # ... and not as "rather not 130": best, but below the floor of its score
-    rather_not = np.asarray([-0.9, -0.9, -0.9, RENDERED_ONLY_MIN_SCORE - 0.1, -0.9])
-    assert opinion.choose(rather_not, ['130', '30'], 2, 0.2) is None
-    assert opinion.choose(rather_not + 0.2, ['130', '30'], 2, 0.2) == '130'
-    assert opinion.choose(scores, [], 2, 0.2) is None
-
-
-def test_a_crop_may_lower_the_floor_of_a_rendered_only_leader_the_model_reads_too() -> None:
-    """``rendered_only_floor`` (a crop's ``crop_rendered_only_min_score``) lowers the least
-    score at which the model's own best label, a leader it knows from renderings only,
-    stands; it never raises the form's floor, and a leader the model does not read first
-    is judged as before."""
-    opinion = _opinion(('30', '70', '80', '130', 'other_sign'), ('30', '70', '80', 'other_sign'))
-    weakly_130 = np.asarray([-0.9, -0.9, -0.9, RENDERED_ONLY_MIN_SCORE - 0.2, -0.9])
-    assert opinion.choose(weakly_130, ['130', '30'], 2, 0.2) is None
-    assert opinion.choose(weakly_130, ['130', '30'], 2, 0.2,
-                          rendered_only_floor=RENDERED_ONLY_MIN_SCORE - 0.3) == '130'
-    assert opinion.choose(weakly_130, ['130', '30'], 2, 0.2,
-                          rendered_only_floor=RENDERED_ONLY_MIN_SCORE - 0.1) is None
-    clearly_130 = weakly_130 + 0.3                     # above the form's floor
-    assert opinion.choose(clearly_130, ['130', '30'], 2, 0.2, rendered_only_floor=0.9) == '130'
-    far_below = np.asarray([1.0, 0.2, -0.5, -0.95, -1.0])   # the model reads 30: unchanged
-    assert opinion.choose(far_below, ['130', '30'], 2, 0.2, rendered_only_floor=-1.0) is None
-
-
-def test_second_opinion_withholds_a_limit_close_to_one_it_cannot_vouch_against() -> None:
-    """A limit the model knows from renderings only, ranked by the correlation within
-    UNSEEN_RUNNER_UP_PSR of its leading limit, withholds the answer."""
-    opinion = _opinion(('30', '60', '80', 'other_sign'), ('30', '80', 'other_sign'))
-    reads_80 = np.asarray([-0.9, -0.9, 0.9, -1.0])
-    close = [('80', 12.0), ('60', 12.0 - UNSEEN_RUNNER_UP_PSR + 0.1), ('30', 9.0)]
-    far = [('80', 12.0), ('60', 12.0 - UNSEEN_RUNNER_UP_PSR - 0.1), ('30', 9.0)]
-    assert opinion.choose(reads_80, ['80', '60', '30'], 3, 0.2, 1.0, close) is None
-    assert opinion.choose(reads_80, ['80', '60', '30'], 3, 0.2, 1.0, far) == '80'
-    # a real runner-up that close is the model's to judge
-    real_close = [('80', 12.0), ('30', 11.9)]
-    assert opinion.choose(reads_80, ['80', '30'], 3, 0.2, 1.0, real_close) == '80'
-    # without the correlation's PSRs there is no such check
-    assert opinion.choose(reads_80, ['80', '60', '30'], 3, 0.2, 1.0) == '80'
-
-
-def test_overruling_a_value_known_from_composites_only_needs_a_clear_lead() -> None:
-    """The model turns the correlation's leading limit into another only with a lead of
-    COMPOSITE_ONLY_OVERRULE_LEAD where either is known from composites only."""
-    labels = ('20', '100', '120', 'other_sign')
-    opinion = dataclasses.replace(_opinion(labels, labels),
-                                  crop_labels=('20', '100', 'other_sign'))
-    reads_100 = np.asarray([-1.0, 0.7, -0.8, -1.0])              # lead 1.5 over 120
-    assert COMPOSITE_ONLY_OVERRULE_LEAD > 1.5
-    assert opinion.choose(reads_100, ['120', '100'], 2, 0.2, 1.0) is None
-    assert opinion.choose(np.asarray([-1.0, 1.0, -1.0, -1.0]), ['120', '100'], 2, 0.2,
-                          1.0) == '100'                          # lead 2.0
-    # between two values with real crops the usual overrule lead holds
-    assert opinion.choose(np.asarray([-0.8, 0.7, -1.0, -1.0]), ['20', '100'], 2, 0.2,
-                          1.0) == '100'
-    # agreeing with the correlation on it needs COMPOSITE_ONLY_ANSWER_LEAD (next test)
-    assert opinion.choose(np.asarray([-1.0, -0.9, 0.9, -1.0]), ['120', '100'], 2, 0.2,
-                          1.0) == '120'
-    # banks that do not record their crop labels treat every real label as one
-    assert _opinion(labels, labels).choose(reads_100, ['120', '100'], 2, 0.2, 1.0) == '100'
-
-
-def test_answering_a_value_known_from_composites_only_needs_a_clear_lead() -> None:
-    """A limit the model knows from composites only (no real crop of it) is answered only
-    with a lead of COMPOSITE_ONLY_ANSWER_LEAD, even where the correlation ranks it first:
-    a real 100 read as the composite 10 by both is withheld."""
-    labels = ('10', '30', '100', 'other_sign')
-    opinion = dataclasses.replace(_opinion(labels, labels),
-                                  crop_labels=('30', '100', 'other_sign'))
-    assert 1.5 < COMPOSITE_ONLY_ANSWER_LEAD < 2.0
-    reads_10 = np.asarray([0.75, -0.91, -0.95, -1.0])             # lead 1.66
-    assert opinion.choose(reads_10, ['10', '30'], 3, 0.2, 1.0) is None
-    sure_10 = np.asarray([0.9, -0.95, -0.95, -1.0])               # lead 1.85
-    assert opinion.choose(sure_10, ['10', '30'], 3, 0.2, 1.0) == '10'
-    # a value with real crops needs no more than min_lead
-    reads_30 = np.asarray([-0.9, 0.2, -0.3, -1.0])                # lead 0.5
-    assert opinion.choose(reads_30, ['30', '10'], 3, 0.2, 1.0) == '30'
-    # banks that do not record their crop labels treat every real label as one
-    assert _opinion(labels, labels).choose(reads_10, ['10', '30'], 3, 0.2, 1.0) == '10'
-
-
-def test_second_opinion_never_turns_a_limit_into_an_end_of_limit() -> None:
-    assert END_OF_LIMIT_LABEL == LABEL_END_OF_LIMIT
-    opinion = _opinion(('20', '30', END_OF_LIMIT_LABEL, 'other_sign'),
-                       ('20', '30', END_OF_LIMIT_LABEL, 'other_sign'))
-    reads_end = np.asarray([-0.6, -0.9, 0.8, -0.9])
-    # the correlation read 20 first: the model's end of limit withholds the answer
-    assert opinion.choose(reads_end, ['20', END_OF_LIMIT_LABEL], 2, 0.2) is None
-    # it confirms an end of limit the correlation read, or one over an unknown sign
-    assert opinion.choose(reads_end, [END_OF_LIMIT_LABEL, '20'], 2, 0.2) == END_OF_LIMIT_LABEL
-    assert opinion.choose(reads_end, ['other_sign', END_OF_LIMIT_LABEL], 2,
-                          0.2) == END_OF_LIMIT_LABEL
 
 
 def test_weak_correlation_peaks_need_a_clear_second_opinion() -> None:

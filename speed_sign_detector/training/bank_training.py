@@ -140,7 +140,7 @@ class TrainingConfig:
     hidden_units: int = 256
     epochs: int = 12
     members: int = 3
-    candidates: int = 3
+    candidates: int = 4
     min_lead: float = MIN_LEAD_OF_MODEL['network']
     augmented_copies: int = 4
     examples_per_class: int = 0
