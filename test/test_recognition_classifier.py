@@ -13,8 +13,11 @@ import pytest
 
 from speed_sign_detector.config import ClassifierConfig
 from speed_sign_detector.detection.candidates import Candidate
+from speed_sign_detector.recognition.candidate_evidence import CorrelationEvidence
 from speed_sign_detector.recognition.classifier import (
     LABEL_NO_SIGN,
+    LONGER_PARTNERS,
+    PARTNER_PSR_GAP,
     Classification,
     Classifier,
     ClassifierInputError,
@@ -331,3 +334,28 @@ def test_sign_cut_by_the_frame_border_is_not_read(classifier: Classifier,
     inside = make_scene('80', radius, centre=(80.0, 60.0))
     answer = classifier.classify(inside, [Candidate(80.0, 60.0, radius / 1.33, 1.0)])[0]
     assert answer.label == '80'
+
+
+def test_longer_partners_are_the_limits_a_lost_outer_digit_turns_into_others() -> None:
+    assert LONGER_PARTNERS == {'5': ('50',), '10': ('100', '110'), '20': ('120',),
+                               '30': ('130',), '40': ('140',)}
+
+
+@pytest.mark.parametrize(('short', 'longer'), [('30', '130'), ('10', '100'), ('10', '110'),
+                                                ('40', '140'), ('5', '50')])
+def test_a_limit_is_withheld_where_its_longer_partner_scores_nearly_as_high(
+        classifier: Classifier, short: str, longer: str) -> None:
+    """A 130 whose 1 the filters lose reads as 30, with 130 close behind: withheld. With
+    130 far behind, or for the longer limit itself, the answer stands; a limit without a
+    longer partner is not affected."""
+    gray = np.full((96, 96), 128, np.uint8)
+
+    def answer(*ranked: tuple[str, float]) -> str:
+        evidence = CorrelationEvidence(tuple(ranked), 48.0, 48.0, 20.0, 0.0, 10.0)
+        return classifier.decide(gray, evidence, use_second_opinion=False, crop=True).label
+
+    near, far = 12.0 - PARTNER_PSR_GAP + 0.5, 12.0 - PARTNER_PSR_GAP - 0.5
+    assert answer((short, 12.0), (longer, near), ('80', 6.0)) == LABEL_NO_SIGN
+    assert answer((short, 12.0), ('80', 6.0), (longer, far)) == short
+    assert answer((longer, 12.0), (short, 11.5)) == longer
+    assert answer(('80', 12.0), ('130', 11.5), ('60', 6.0)) == '80'

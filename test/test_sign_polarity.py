@@ -8,9 +8,14 @@ import numpy as np
 import pytest
 
 from speed_sign_detector.config import ClassifierConfig
+from speed_sign_detector.recognition import candidate_evidence
 from speed_sign_detector.recognition.classifier import Classifier
 from speed_sign_detector.recognition.sign_designs import LedLook, design_gray, lit_on_dark_design
-from speed_sign_detector.recognition.sign_polarity import is_lit_on_dark, polarity_measures
+from speed_sign_detector.recognition.sign_polarity import (
+    is_lit_on_dark,
+    may_be_lit_on_dark,
+    polarity_measures,
+)
 
 DESIGNS = ('painted', 'yellow', 'led', 'led_amber', 'led_dot_matrix', 'led_dark_on_lit')
 LOOKS = (LedLook(glow=0.0), LedLook(glow=0.8, exposure=1.7))
@@ -72,6 +77,40 @@ def test_led_signs_are_read_inverted_as_their_value_or_withheld(
     assert not wrong, wrong
     # read, not only withheld: the inverted patch is read like a painted sign
     assert sum(right) >= 0.75 * len(right), right
+
+
+def test_a_single_dotted_digit_is_unsure_and_read_inverted_where_clear(
+        classifier: Classifier, monkeypatch: pytest.MonkeyPatch) -> None:
+    """An electronic 5 fills too little of the digit box for the strict test: its polarity
+    is unsure, and the classifier reads it inverted where that reading is clear (a PSR of
+    ``INVERTED_READING_MIN_PSR``), as its value or withheld."""
+    read, read_strict, wrong = [], [], []
+    for background in (25.0, 60.0):
+        for diameter in (16, 20, 24, 32, 40):
+            crop = _crop('5', 'led_dot_matrix', diameter, background, LedLook(glow=0.0))
+            centre = crop.shape[0] / 2.0
+            assert not is_lit_on_dark(crop, centre, centre, diameter / 2.0)
+            assert may_be_lit_on_dark(crop, centre, centre, diameter / 2.0)
+            answer = classifier.classify_crop(crop)
+            if answer.is_limit and answer.label != '5':
+                wrong.append((background, diameter, answer.label))
+            read.append(answer.label == '5')
+            with monkeypatch.context() as patch:  # no inverted reading stands
+                patch.setattr(candidate_evidence, 'INVERTED_READING_MIN_PSR', np.inf)
+                read_strict.append(classifier.classify_crop(crop).label == '5')
+    assert not wrong, wrong
+    assert sum(read) >= 0.7 * len(read), read
+    assert not any(read_strict), read_strict  # the painted reading finds no 5
+
+
+def test_painted_signs_and_flat_windows_are_not_unsure() -> None:
+    flat = np.full((40, 40), 90, np.uint8)
+    assert not may_be_lit_on_dark(flat, 20.0, 20.0, 15.0)
+    assert not may_be_lit_on_dark(flat, 20.0, 20.0, float('inf'))
+    for kind in ('5', '30', '120'):
+        crop = _crop(kind, 'painted', 36, 120.0)
+        centre = crop.shape[0] / 2.0
+        assert not may_be_lit_on_dark(crop, centre, centre, 18.0), kind
 
 
 def test_painted_signs_are_not_inverted(classifier: Classifier) -> None:

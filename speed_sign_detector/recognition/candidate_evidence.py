@@ -30,7 +30,17 @@ from speed_sign_detector.recognition.correlation import (
     transposed_spectra,
 )
 from speed_sign_detector.recognition.filter_banks import SizeBank
-from speed_sign_detector.recognition.sign_polarity import is_lit_on_dark
+from speed_sign_detector.recognition.sign_polarity import Polarity, sign_polarity
+
+
+#: A candidate whose polarity is unsure (:attr:`.Polarity.UNSURE`: it may be an electronic
+#: sign lit on a dark face, a single or dotted digit, a small sign's blurred ring of lamps)
+#: and whose painted reading stays below ``psr_threshold`` is read inverted too; the
+#: inverted reading stands where its leading class scores at least this PSR. gtsrb-dev
+#: look-alikes (blue, no-entry and no-vehicles signs) read inverted score 12 at most (at
+#: 8, 176 of 3,920 would have been read inverted and 3 of them as 40); rendered LED
+#: signs read right score 11 to 20.
+INVERTED_READING_MIN_PSR = 12.0
 
 
 @dataclass(frozen=True)
@@ -89,6 +99,8 @@ class _Position:
     raw: np.ndarray  # (largest, largest) uint8 ROI
     enhanced: np.ndarray  # the same after CLAHE (or ``raw``)
     inverted: bool  # the ROI is the image inverted (a sign lit on a dark face)
+    # read painted, but it may be lit on a dark face (:attr:`.Polarity.UNSURE`)
+    polarity_unsure: bool = False
     # by bank index: (best detection PSR of the size, peak row, peak column); the peak in
     # plane pixels, unwrapped around the expected peak (it may lie before index 0)
     detections: dict[int, tuple[float, int, int]] = field(default_factory=dict)
@@ -178,23 +190,46 @@ class EvidenceSearch:
             Per position, in order: the ranked class scores with the sign's measured
             centre and size, or :class:`NoSignFound`.
         """
-        prepared = [self._prepare(gray, x_px, y_px, radius_px)
-                    for x_px, y_px, radius_px in positions]
-        searched = [p for p in prepared if isinstance(p, _Position)]
-        self._detect(searched)
         threshold = (self.config.detection_psr_threshold if detection_psr_threshold is None
                      else detection_psr_threshold)
+        prepared = [self._prepare(gray, x_px, y_px, radius_px)
+                    for x_px, y_px, radius_px in positions]
+        found = self._search(prepared, threshold)
+        # a sign whose polarity is unsure and that reads as nothing clear painted is read
+        # inverted too; a clear inverted reading stands
+        unsure = [index for index, (position, evidence) in enumerate(zip(prepared, found))
+                  if isinstance(position, _Position) and position.polarity_unsure
+                  and not self._clear(evidence)]
+        if unsure:
+            inverted = self._search([self._prepare(gray, *positions[index], invert=True)
+                                     for index in unsure], threshold)
+            for index, evidence in zip(unsure, inverted):
+                if _top_score(evidence) >= INVERTED_READING_MIN_PSR:
+                    found[index] = evidence
+        return found
+
+    def _search(self, prepared: Sequence[_Position | NoSignFound], threshold: float
+                ) -> list[CorrelationEvidence | NoSignFound]:
+        """Detect and classify the prepared positions (:meth:`evidence`'s steps)."""
+        searched = [p for p in prepared if isinstance(p, _Position)]
+        self._detect(searched)
         located = [p for p in searched if p.detection_psr >= threshold]
         self._classify(located)
         return [p if isinstance(p, NoSignFound) else self._result(p, threshold)
                 for p in prepared]
 
+    def _clear(self, evidence: CorrelationEvidence | NoSignFound) -> bool:
+        """True for evidence whose leading class scores at least ``psr_threshold``."""
+        return _top_score(evidence) >= self.config.psr_threshold
+
     # -- steps ------------------------------------------------------------------------
 
-    def _prepare(self, gray: np.ndarray, x_px: float, y_px: float, radius_px: float
-                 ) -> _Position | NoSignFound:
+    def _prepare(self, gray: np.ndarray, x_px: float, y_px: float, radius_px: float,
+                 invert: bool | None = None) -> _Position | NoSignFound:
         """The ROI and detection sizes of a position, or :class:`NoSignFound` when the
-        position or size is unusable."""
+        position or size is unusable. ``invert``: read the image inverted (``True``) or
+        not (``False``); ``None`` decides by the sign's polarity
+        (:mod:`.sign_polarity`)."""
         config = self.config
         if not (math.isfinite(x_px) and math.isfinite(y_px) and math.isfinite(radius_px)):
             return NoSignFound()
@@ -216,12 +251,16 @@ class EvidenceSearch:
         raw, scale = _roi(gray, x_px, y_px, largest, scale)
         # an electronic sign (lit on a dark face) is read inverted: the polarity of the
         # painted templates (the test on the ROI, centred on the position)
-        inverted = is_lit_on_dark(raw, largest / 2.0, largest / 2.0, radius_px * scale)
-        if inverted:
+        unsure = False
+        if invert is None:
+            polarity = sign_polarity(raw, largest / 2.0, largest / 2.0, radius_px * scale)
+            invert = polarity is Polarity.LIT_ON_DARK
+            unsure = polarity is Polarity.UNSURE
+        if invert:
             raw = 255 - raw
         enhanced = self._clahe.apply(raw) if self._clahe is not None else raw
         return _Position(x_px, y_px, radius_px, scale, radius_scaled, indices, largest, raw,
-                         enhanced, inverted)
+                         enhanced, invert, unsure)
 
     def _detect(self, positions: Sequence[_Position]) -> None:
         """Every position's best detection filter (size) and its peak; sets
@@ -469,6 +508,11 @@ def _signed_shift(shift: IndexT, period: int) -> IndexT:
     """A circular shift of a correlation plane of side ``period`` (an int, or an integer
     array of them) as the signed shift in ``[-period // 2, period - period // 2)``."""
     return (shift + period // 2) % period - period // 2
+
+
+def _top_score(evidence: CorrelationEvidence | NoSignFound) -> float:
+    """The leading class's score of ``evidence``, ``-inf`` for :class:`NoSignFound`."""
+    return evidence.ranked[0][1] if isinstance(evidence, CorrelationEvidence) else -math.inf
 
 
 def _mean(values: Sequence[float]) -> float:
