@@ -85,17 +85,20 @@ from speed_sign_detector.recognition.trained_bank import (
 
 _LOG = logging.getLogger(__name__)
 
+
+def _longer_partners() -> dict[str, tuple[str, ...]]:
+    """Each limit whose digits begin or end a longer limit's, with those longer limits."""
+    values = [str(value) for value in LIMIT_VALUES_KMH]
+    partners = {short: tuple(longer for longer in values if len(longer) > len(short)
+                             and (longer.startswith(short) or longer.endswith(short)))
+                for short in values}
+    return {short: longer for short, longer in partners.items() if longer}
+
+
 #: Each limit whose digits begin or end a longer limit's, with those longer limits (5: 50;
 #: 10: 100, 110; 20: 120; 30: 130; 40: 140): a sign of the longer value whose outer digit
 #: the filters lose (small, blurred, cut by the window) reads as the shorter one.
-LONGER_PARTNERS: dict[str, tuple[str, ...]] = {
-    short: partners for short, partners in (
-        (str(value), tuple(str(longer) for longer in LIMIT_VALUES_KMH
-                           if len(str(longer)) > len(str(value))
-                           and (str(longer).startswith(str(value))
-                                or str(longer).endswith(str(value)))))
-        for value in LIMIT_VALUES_KMH)
-    if partners}
+LONGER_PARTNERS: dict[str, tuple[str, ...]] = _longer_partners()
 #: A limit of :data:`LONGER_PARTNERS` is withheld where the correlation scores one of its
 #: longer partners within this PSR of it (or above it). Leaving 120 out of training, its
 #: held-out signs read as 20 had 120 within 0.0-2.9 PSR; 20s and 30s read right had it
