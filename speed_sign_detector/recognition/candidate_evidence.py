@@ -201,8 +201,8 @@ class EvidenceSearch:
                   if isinstance(position, _Position) and position.polarity_unsure
                   and not self._clear(evidence)]
         if unsure:
-            inverted = self._search([self._prepare(gray, *positions[index], invert=True)
-                                     for index in unsure], threshold)
+            inverted = self._search([self._inverted(prepared[index]) for index in unsure],
+                                    threshold)
             for index, evidence in zip(unsure, inverted):
                 if _top_score(evidence) >= INVERTED_READING_MIN_PSR:
                     found[index] = evidence
@@ -224,12 +224,10 @@ class EvidenceSearch:
 
     # -- steps ------------------------------------------------------------------------
 
-    def _prepare(self, gray: np.ndarray, x_px: float, y_px: float, radius_px: float,
-                 invert: bool | None = None) -> _Position | NoSignFound:
+    def _prepare(self, gray: np.ndarray, x_px: float, y_px: float, radius_px: float
+                 ) -> _Position | NoSignFound:
         """The ROI and detection sizes of a position, or :class:`NoSignFound` when the
-        position or size is unusable. ``invert``: read the image inverted (``True``) or
-        not (``False``); ``None`` decides by the sign's polarity
-        (:mod:`.sign_polarity`)."""
+        position or size is unusable."""
         config = self.config
         if not (math.isfinite(x_px) and math.isfinite(y_px) and math.isfinite(radius_px)):
             return NoSignFound()
@@ -251,16 +249,23 @@ class EvidenceSearch:
         raw, scale = _roi(gray, x_px, y_px, largest, scale)
         # an electronic sign (lit on a dark face) is read inverted: the polarity of the
         # painted templates (the test on the ROI, centred on the position)
-        unsure = False
-        if invert is None:
-            polarity = sign_polarity(raw, largest / 2.0, largest / 2.0, radius_px * scale)
-            invert = polarity is Polarity.LIT_ON_DARK
-            unsure = polarity is Polarity.UNSURE
-        if invert:
+        polarity = sign_polarity(raw, largest / 2.0, largest / 2.0, radius_px * scale)
+        inverted = polarity is Polarity.LIT_ON_DARK
+        if inverted:
             raw = 255 - raw
-        enhanced = self._clahe.apply(raw) if self._clahe is not None else raw
         return _Position(x_px, y_px, radius_px, scale, radius_scaled, indices, largest, raw,
-                         enhanced, invert, unsure)
+                         self._enhance(raw), inverted, polarity is Polarity.UNSURE)
+
+    def _inverted(self, position: _Position) -> _Position:
+        """A fresh, unsearched copy of a position read painted, its ROI inverted."""
+        raw = 255 - position.raw
+        return _Position(position.x_px, position.y_px, position.radius_px, position.scale,
+                         position.radius_scaled, position.indices, position.largest, raw,
+                         self._enhance(raw), True)
+
+    def _enhance(self, raw: np.ndarray) -> np.ndarray:
+        """The ROI after CLAHE (``raw`` itself without CLAHE)."""
+        return self._clahe.apply(raw) if self._clahe is not None else raw
 
     def _detect(self, positions: Sequence[_Position]) -> None:
         """Every position's best detection filter (size) and its peak; sets
