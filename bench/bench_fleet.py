@@ -44,7 +44,8 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from speed_sign_detector.config import PipelineConfig, load_yaml
+from speed_sign_detector.config import PipelineConfig
+from speed_sign_detector.config_parameters import load_yaml
 from speed_sign_detector.synthetic import DriveConfig, SyntheticDrive
 from speed_sign_detector.tools.fleet import FleetOptions, run_fleet
 from speed_sign_detector.tools.fleet_jobs import (

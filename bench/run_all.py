@@ -97,7 +97,7 @@ from run_all_stages import (  # noqa: E402
     pipeline_stage,
 )
 
-from speed_sign_detector.config import to_parameters  # noqa: E402
+from speed_sign_detector.config_parameters import to_parameters
 from speed_sign_detector.errors import SpeedSignError  # noqa: E402
 
 #: The papers' headline figures: quoted from /work/shared/papers, NOT measured here.

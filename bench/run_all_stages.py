@@ -38,9 +38,8 @@ from speed_sign_detector.config import (  # noqa: E402
     ClassifierConfig,
     DetectorConfig,
     PipelineConfig,
-    load_yaml,
-    to_parameters,
 )
+from speed_sign_detector.config_parameters import load_yaml, to_parameters  # noqa: E402
 from speed_sign_detector.detection.backend_trial import (  # noqa: E402
     TIMED_FRAMES,
     WARMUP_FRAMES,

@@ -5,9 +5,8 @@ from pathlib import Path
 
 import pytest
 
-from speed_sign_detector.config import (
-    DetectorConfig,
-    PipelineConfig,
+from speed_sign_detector.config import DetectorConfig, PipelineConfig
+from speed_sign_detector.config_parameters import (
     from_parameters,
     load_yaml,
     parameter_specs,

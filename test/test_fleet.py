@@ -20,7 +20,8 @@ import pytest
 ray = pytest.importorskip('ray', reason='Ray is not installed: pip install -e ".[test]"')
 
 from speed_sign_detector.bag_io import BagReader  # noqa: E402
-from speed_sign_detector.config import PipelineConfig, load_yaml  # noqa: E402
+from speed_sign_detector.config import PipelineConfig
+from speed_sign_detector.config_parameters import load_yaml
 from speed_sign_detector.synthetic import DriveConfig, SyntheticDrive  # noqa: E402
 from speed_sign_detector.tools import eval as eval_tool  # noqa: E402
 from speed_sign_detector.tools import fleet  # noqa: E402

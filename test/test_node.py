@@ -40,11 +40,8 @@ from speed_sign_detector.classifier_placement import (
     choose_classifier_placement,
     usable_cpu_count,
 )
-from speed_sign_detector.config import (
-    DetectorConfig,
-    node_option_specs,
-    parameter_specs,
-)
+from speed_sign_detector.config import DetectorConfig
+from speed_sign_detector.config_parameters import node_option_specs, parameter_specs
 from speed_sign_detector.ros.messages import image_message, pointcloud_to_array
 from speed_sign_detector.ros.node import (
     NODE_NAME,

@@ -30,7 +30,7 @@ from sensor_msgs.msg import Image, PointCloud2
 from std_msgs.msg import Header
 
 from speed_sign_detector.bag_io import BagReader
-from speed_sign_detector.config import load_yaml, to_parameters
+from speed_sign_detector.config_parameters import load_yaml, to_parameters
 from speed_sign_detector.ros.messages import image_message, pointcloud_to_array
 from speed_sign_detector.synthetic import DriveConfig, SyntheticDrive
 from speed_sign_detector.tools.synth import write_drive

@@ -10,7 +10,8 @@ import cv2
 import numpy as np
 import pytest
 
-from speed_sign_detector.config import ClassifierConfig, ConfigError, from_parameters
+from speed_sign_detector.config import ClassifierConfig, ConfigError
+from speed_sign_detector.config_parameters import from_parameters
 from speed_sign_detector.labelled_crops import LabelledCrop
 from speed_sign_detector.recognition.candidate_evidence import CorrelationEvidence
 from speed_sign_detector.recognition.classification import LABEL_NO_SIGN

@@ -20,7 +20,8 @@ from scene_helpers import approach_frames, textured_background
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 
-from speed_sign_detector.config import PipelineConfig, load_yaml
+from speed_sign_detector.config import PipelineConfig
+from speed_sign_detector.config_parameters import load_yaml
 from speed_sign_detector.detection.detector import DETECTION_STAGES
 from speed_sign_detector.pipeline import STAGE_TIMINGS, FrameResult, Pipeline
 from speed_sign_detector.ros.messages import image_message

@@ -52,9 +52,8 @@ from sensor_msgs.msg import CompressedImage, Image, PointCloud2, PointField
 from std_msgs.msg import Header, UInt16
 
 from speed_sign_detector.classifier_placement import ClassifierPlacement, place_classifier
-from speed_sign_detector.config import (
-    NodeOptions,
-    PipelineConfig,
+from speed_sign_detector.config import NodeOptions, PipelineConfig
+from speed_sign_detector.config_parameters import (
     from_parameters,
     node_option_specs,
     parameter_specs,

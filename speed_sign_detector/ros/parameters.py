@@ -21,7 +21,7 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from speed_sign_detector.config import (
+from speed_sign_detector.config_parameters import (
     ParameterSpec,
     node_option_specs,
     parameter_specs,

@@ -107,7 +107,8 @@ import numpy as np
 
 from speed_sign_detector.bag_io import BagReader, header_stamp_ns
 from speed_sign_detector.classifier_placement import place_classifier
-from speed_sign_detector.config import PipelineConfig, load_yaml
+from speed_sign_detector.config import PipelineConfig
+from speed_sign_detector.config_parameters import load_yaml
 from speed_sign_detector.errors import ImageConversionError, SpeedSignError
 from speed_sign_detector.limit_in_force import score_time_in_limit
 from speed_sign_detector.tools.bag_grading import (  # noqa: F401 (re-exported)

@@ -46,7 +46,8 @@ from typing import Any
 
 import numpy as np
 
-from speed_sign_detector.config import ClassifierConfig, load_yaml
+from speed_sign_detector.config import ClassifierConfig
+from speed_sign_detector.config_parameters import load_yaml
 from speed_sign_detector.errors import TrainingDataError, TruthFileError
 from speed_sign_detector.image_files import (
     UnreadableImage,

@@ -33,7 +33,8 @@ import sys
 import time
 from pathlib import Path
 
-from speed_sign_detector.config import PipelineConfig, load_yaml, parameter_specs
+from speed_sign_detector.config import PipelineConfig
+from speed_sign_detector.config_parameters import load_yaml, parameter_specs
 from speed_sign_detector.detection.detector import Detector
 from speed_sign_detector.errors import InvalidFrameError, TruthFileError
 from speed_sign_detector.image_files import (

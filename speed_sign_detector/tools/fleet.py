@@ -41,7 +41,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from speed_sign_detector.config import PipelineConfig, load_yaml
+from speed_sign_detector.config import PipelineConfig
+from speed_sign_detector.config_parameters import load_yaml
 from speed_sign_detector.tools.cli_types import (
     non_negative_integer,
     number_in_range,

@@ -43,7 +43,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from speed_sign_detector.config import PipelineConfig, to_parameters
+from speed_sign_detector.config import PipelineConfig
+from speed_sign_detector.config_parameters import to_parameters
 from speed_sign_detector.errors import SpeedSignError
 
 #: Pipeline parameters that cannot change a result (left out of the job key).

@@ -35,7 +35,8 @@ from pathlib import Path
 from typing import Any
 
 from speed_sign_detector import __version__
-from speed_sign_detector.config import ClassifierConfig, DetectorConfig, PipelineConfig, load_yaml
+from speed_sign_detector.config import ClassifierConfig, DetectorConfig, PipelineConfig
+from speed_sign_detector.config_parameters import load_yaml
 from speed_sign_detector.errors import SpeedSignError
 from speed_sign_detector.recognition.trained_bank import save_trained_bank
 from speed_sign_detector.tools.approach_validation import ApproachFolds, format_approach_line
