@@ -38,11 +38,33 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass
-from functools import lru_cache
 
 import cv2
 import numpy as np
 
+from speed_sign_detector.synthetic_scenery import (
+    FAR_AZIMUTH_RAD,
+    FAR_SIZE,
+    FAR_TAN_HIGH,
+    FAR_TAN_LOW,
+    FOG_DISTANCE_M,
+    GROUND_HALF_WIDTH_M,
+    GROUND_PERIOD_M,
+    GROUND_RESOLUTION_M,
+    ROAD_LEFT_M,
+    ROAD_RIGHT_M,
+    add_glow,
+    apply_lighting,
+    background_gain,
+    composite,
+    far_texture,
+    fill_ellipse,
+    fill_rect,
+    ground_texture,
+    headlight_pool,
+    line_kernel,
+    sign_image,
+)
 from speed_sign_detector.truth import TruthRow, is_end_of_limit_kind
 
 #: Lighting choices of a drive.
@@ -59,15 +81,6 @@ MIN_TRUTH_RADIUS_PX = 5.0
 MIN_TRUTH_RADIUS_END_SIGN_PX = 3.5
 #: ... and at least this fraction of its box lies inside the image.
 MIN_TRUTH_VISIBLE_FRACTION = 0.75
-
-ROAD_LEFT_M, ROAD_RIGHT_M, LANE_WIDTH_M = -5.4, 1.8, 3.6
-GROUND_RESOLUTION_M = 0.05        # ground texture: metres per texel
-GROUND_HALF_WIDTH_M = 30.0        # ground texture spans X in [-30, 30] m
-GROUND_PERIOD_M = 60.0            # ... and repeats every 60 m along Z
-FOG_DISTANCE_M = 90.0             # ground fades into the far scene over this distance
-FAR_AZIMUTH_RAD = 1.2             # far scene texture spans azimuth [-1.2, 1.2] rad
-FAR_TAN_LOW, FAR_TAN_HIGH = -0.06, 0.7   # ... and tan(elevation) in this range
-FAR_SIZE = (700, 2400)            # far scene texture rows, columns
 
 
 @dataclass(frozen=True)
@@ -215,15 +228,6 @@ class _Prop:
     shade: float
 
 
-@lru_cache(maxsize=4096)
-def _sign_image(kind: str, diameter_px: int) -> tuple[np.ndarray, np.ndarray]:
-    """Rendered sign (premultiplied BGR float32 (D,D,3), alpha float32 (D,D)), cached."""
-    from speed_sign_detector.recognition.templates import render_sign
-
-    bgr, alpha = render_sign(kind, diameter_px)
-    return bgr.astype(np.float32), alpha.astype(np.float32)
-
-
 def min_truth_radius_px(kind: str) -> float:
     """The least radius, pixels, at which the truth lists a sign of this kind:
     :data:`MIN_TRUTH_RADIUS_END_SIGN_PX` for an end sign (no red ring), else
@@ -268,14 +272,14 @@ class SyntheticDrive:
         self._props: tuple[_Prop, ...] = self._place_props(rng) if config.distractors else ()
         self._lead_vehicle = (self._plan_lead_vehicle(rng) if config.distractors else None)
         self._stickers = self._plan_stickers(rng) if config.distractors else ()
-        self._ground = _ground_texture(np.random.default_rng([config.seed, 2]))
-        self._far = _far_texture(np.random.default_rng([config.seed, 3]))
+        self._ground = ground_texture(np.random.default_rng([config.seed, 2]))
+        self._far = far_texture(np.random.default_rng([config.seed, 3]))
         width, height = config.width_px, config.height_px
         cols, rows = np.meshgrid(np.arange(width, dtype=np.float32) + 0.5,
                                  np.arange(height, dtype=np.float32) + 0.5)
         self._ray_x = (cols - width / 2.0) / config.focal_px
         self._ray_y = (rows - height / 2.0) / config.focal_px
-        self._headlight = _headlight_pool(width, height)
+        self._headlight = headlight_pool(width, height)
 
     # ----------------------------------------------------------------- public API
     @property
@@ -323,7 +327,7 @@ class SyntheticDrive:
         self._draw_props(image, pose, night, emissive=False)
         self._draw_lead_vehicle(image, time_s, pose, night, emissive=False)
         self._draw_stickers(image)
-        image = _apply_lighting(image, darkness, self._headlight)
+        image = apply_lighting(image, darkness, self._headlight)
         rows = []
         for sign in sorted(self.signs, key=lambda s: -(s.z_m - pose.z_m)):
             view = self._sign_view(sign, pose)
@@ -506,36 +510,36 @@ class SyntheticDrive:
                 trunk_w = max(1, int(0.25 * scale))
                 crown_r = prop.size_m * 0.45 * scale
                 top_v = v_px - prop.size_m * 1.3 * scale
-                _fill_rect(image, u_px - trunk_w / 2, top_v, u_px + trunk_w / 2, v_px,
-                           (40 * prop.shade, 55 * prop.shade, 75 * prop.shade))
-                _fill_ellipse(image, u_px, top_v - 0.2 * crown_r, crown_r, 1.2 * crown_r,
-                              (45 * prop.shade, 100 * prop.shade, 60 * prop.shade))
-                _fill_ellipse(image, u_px - 0.3 * crown_r, top_v - 0.5 * crown_r,
-                              0.5 * crown_r, 0.6 * crown_r,
-                              (60 * prop.shade, 125 * prop.shade, 80 * prop.shade))
+                fill_rect(image, u_px - trunk_w / 2, top_v, u_px + trunk_w / 2, v_px,
+                          (40 * prop.shade, 55 * prop.shade, 75 * prop.shade))
+                fill_ellipse(image, u_px, top_v - 0.2 * crown_r, crown_r, 1.2 * crown_r,
+                             (45 * prop.shade, 100 * prop.shade, 60 * prop.shade))
+                fill_ellipse(image, u_px - 0.3 * crown_r, top_v - 0.5 * crown_r,
+                             0.5 * crown_r, 0.6 * crown_r,
+                             (60 * prop.shade, 125 * prop.shade, 80 * prop.shade))
             elif prop.kind == 'bush' and not emissive:
                 radius = prop.size_m * 0.3 * scale
-                _fill_ellipse(image, u_px, v_px - 0.6 * radius, 1.4 * radius, 0.8 * radius,
-                              (40 * prop.shade, 90 * prop.shade, 55 * prop.shade))
+                fill_ellipse(image, u_px, v_px - 0.6 * radius, 1.4 * radius, 0.8 * radius,
+                             (40 * prop.shade, 90 * prop.shade, 55 * prop.shade))
             elif prop.kind == 'lamp':
                 top_v = v_px - 5.0 * scale
                 globe_r = prop.size_m * scale
                 if not emissive:
-                    _fill_rect(image, u_px - 0.06 * scale, top_v, u_px + 0.06 * scale, v_px,
-                               (105, 105, 110))
-                    _fill_ellipse(image, u_px, top_v - globe_r, globe_r, globe_r,
-                                  (215, 220, 220))
+                    fill_rect(image, u_px - 0.06 * scale, top_v, u_px + 0.06 * scale, v_px,
+                              (105, 105, 110))
+                    fill_ellipse(image, u_px, top_v - globe_r, globe_r, globe_r,
+                                 (215, 220, 220))
                 elif night > 0.0:
-                    _add_glow(image, u_px, top_v - globe_r, globe_r, 200.0 * night)
+                    add_glow(image, u_px, top_v - globe_r, globe_r, 200.0 * night)
             elif prop.kind == 'mirror' and not emissive:
                 top_v = v_px - 2.4 * scale
                 radius = prop.size_m * scale
-                _fill_rect(image, u_px - 0.05 * scale, top_v, u_px + 0.05 * scale, v_px,
-                           (110, 110, 110))
-                _fill_ellipse(image, u_px, top_v, radius, radius, (20, 90, 230))
-                _fill_ellipse(image, u_px, top_v, 0.8 * radius, 0.8 * radius, (150, 140, 130))
-                _fill_ellipse(image, u_px - 0.2 * radius, top_v - 0.2 * radius,
-                              0.4 * radius, 0.3 * radius, (200, 190, 180))
+                fill_rect(image, u_px - 0.05 * scale, top_v, u_px + 0.05 * scale, v_px,
+                          (110, 110, 110))
+                fill_ellipse(image, u_px, top_v, radius, radius, (20, 90, 230))
+                fill_ellipse(image, u_px, top_v, 0.8 * radius, 0.8 * radius, (150, 140, 130))
+                fill_ellipse(image, u_px - 0.2 * radius, top_v - 0.2 * radius,
+                             0.4 * radius, 0.3 * radius, (200, 190, 180))
 
     def _draw_lead_vehicle(self, image: np.ndarray, time_s: float, pose: _Pose, night: float,
                            emissive: bool) -> None:
@@ -559,27 +563,27 @@ class SyntheticDrive:
         lights = ((u_px - 0.75 * scale, v_px - 1.0 * scale), (u_px + 0.75 * scale,
                                                              v_px - 1.0 * scale))
         if not emissive:
-            _fill_rect(image, u_px - half_w, v_px - body_h, u_px + half_w, v_px - 0.25 * scale,
-                       (150 * shade, 150 * shade, 140 * shade))
-            _fill_rect(image, u_px - half_w, v_px - 0.45 * scale, u_px + half_w, v_px,
-                       (30, 30, 30))
-            _fill_ellipse(image, u_px, wheel_v, 0.36 * scale, 0.36 * scale, (25, 25, 25))
-            _fill_ellipse(image, u_px, wheel_v, 0.2 * scale, 0.2 * scale, (170, 170, 175))
-            _fill_ellipse(image, u_px, wheel_v, 0.05 * scale, 0.05 * scale, (60, 60, 60))
+            fill_rect(image, u_px - half_w, v_px - body_h, u_px + half_w, v_px - 0.25 * scale,
+                      (150 * shade, 150 * shade, 140 * shade))
+            fill_rect(image, u_px - half_w, v_px - 0.45 * scale, u_px + half_w, v_px,
+                      (30, 30, 30))
+            fill_ellipse(image, u_px, wheel_v, 0.36 * scale, 0.36 * scale, (25, 25, 25))
+            fill_ellipse(image, u_px, wheel_v, 0.2 * scale, 0.2 * scale, (170, 170, 175))
+            fill_ellipse(image, u_px, wheel_v, 0.05 * scale, 0.05 * scale, (60, 60, 60))
             for light_u, light_v in lights:
-                _fill_ellipse(image, light_u, light_v, light_r, light_r, (40, 40, 170))
+                fill_ellipse(image, light_u, light_v, light_r, light_r, (40, 40, 170))
         elif night > 0.0:
             for light_u, light_v in lights:
-                _add_glow(image, light_u, light_v, light_r, 180.0 * night, colour=(0.3, 0.3, 1.0))
+                add_glow(image, light_u, light_v, light_r, 180.0 * night, colour=(0.3, 0.3, 1.0))
 
     def _draw_stickers(self, image: np.ndarray) -> None:
         for x_px, y_px, radius, style in self._stickers:
             if style == 0:   # blue parking sticker with a white rim
-                _fill_ellipse(image, x_px, y_px, radius, radius, (230, 230, 230))
-                _fill_ellipse(image, x_px, y_px, 0.8 * radius, 0.8 * radius, (170, 90, 30))
+                fill_ellipse(image, x_px, y_px, radius, radius, (230, 230, 230))
+                fill_ellipse(image, x_px, y_px, 0.8 * radius, 0.8 * radius, (170, 90, 30))
             else:            # round dashboard dial
-                _fill_ellipse(image, x_px, y_px, radius, radius, (35, 35, 35))
-                _fill_ellipse(image, x_px, y_px, 0.85 * radius, 0.85 * radius, (90, 90, 90))
+                fill_ellipse(image, x_px, y_px, radius, radius, (35, 35, 35))
+                fill_ellipse(image, x_px, y_px, 0.85 * radius, 0.85 * radius, (90, 90, 90))
 
     def _sign_view(self, sign: SignPlacement, pose: _Pose) -> _SignView | None:
         """Where the sign appears, or None when it is behind the camera or off-image."""
@@ -615,15 +619,15 @@ class SyntheticDrive:
         # Pole from the ground to the plate (part of the lit scene).
         ground = self._project(pose, sign.x_m, height_m, sign.z_m)
         night = float(np.clip((darkness - 0.5) * 2.0, 0.0, 1.0))
-        background_gain = _background_gain(darkness)
+        gain = background_gain(darkness)
         if ground is not None:
             pole_half_w = max(0.6, 0.04 * self.config.focal_px / ground[2])
-            _fill_rect(image, u_px - pole_half_w, v_px, u_px + pole_half_w, ground[1],
-                       tuple(c * background_gain for c in (120.0, 125.0, 125.0)))
+            fill_rect(image, u_px - pole_half_w, v_px, u_px + pole_half_w, ground[1],
+                      tuple(c * gain for c in (120.0, 125.0, 125.0)))
         if radius_px < 1.5:
             return
         diameter = max(4, int(round(2.0 * radius_px)))
-        sign_bgr, sign_alpha = _sign_image(sign.kind, diameter)
+        sign_bgr, sign_alpha = sign_image(sign.kind, diameter)
         # Forward-motion blur: where the sign was at the start of the exposure.
         earlier = _Pose(pose.x_m, pose.z_m - self.config.speed_mps * exposure_s, pose.yaw_rad,
                         pose.pitch_rad, 0.0, 0.0)
@@ -642,7 +646,7 @@ class SyntheticDrive:
         matrix = np.hstack([linear, offset[:, None]]).astype(np.float64)
         premultiplied = cv2.warpAffine(sign_bgr, matrix, (size, size), flags=cv2.INTER_LINEAR)
         alpha = cv2.warpAffine(sign_alpha, matrix, (size, size), flags=cv2.INTER_LINEAR)
-        kernel = _line_kernel(*blur)
+        kernel = line_kernel(*blur)
         if kernel is not None:
             premultiplied = cv2.filter2D(premultiplied, -1, kernel)
             alpha = cv2.filter2D(alpha, -1, kernel)
@@ -653,195 +657,12 @@ class SyntheticDrive:
         fading = sign.fading + 0.3 * night   # washed out and low contrast
         mean_colour = premultiplied.reshape(-1, 3).sum(axis=0) / max(float(alpha.sum()), 1e-6)
         lit = gain * ((1.0 - fading) * premultiplied + fading * alpha[..., None] * mean_colour)
-        _composite(image, origin_u, origin_v, lit, alpha)
-
-
-# ---------------------------------------------------------------------- textures
-def _periodic_noise(rng: np.random.Generator, shape: tuple[int, int], sigma_px: float
-                    ) -> np.ndarray:
-    """Smooth noise, zero mean, unit-ish std, periodic in both axes (float32)."""
-    noise = rng.standard_normal(shape).astype(np.float32)
-    pad = int(3 * sigma_px) + 1
-    padded = np.pad(noise, pad, mode='wrap')
-    blurred = cv2.GaussianBlur(padded, (0, 0), sigma_px)[pad:-pad, pad:-pad]
-    return blurred / max(float(blurred.std()), 1e-6)
-
-
-def _ground_texture(rng: np.random.Generator) -> np.ndarray:
-    """Road and verges seen from above: (rows along Z, columns along X, 3) float32 BGR."""
-    rows = int(round(GROUND_PERIOD_M / GROUND_RESOLUTION_M))
-    cols = int(round(2 * GROUND_HALF_WIDTH_M / GROUND_RESOLUTION_M))
-    x_m = (np.arange(cols, dtype=np.float32) + 0.5) * GROUND_RESOLUTION_M - GROUND_HALF_WIDTH_M
-    z_m = (np.arange(rows, dtype=np.float32) + 0.5) * GROUND_RESOLUTION_M
-    fine = _periodic_noise(rng, (rows, cols), 0.7)
-    coarse = _periodic_noise(rng, (rows, cols), 12.0)
-    texture = np.empty((rows, cols, 3), np.float32)
-    # Grass verges.
-    grass = np.array([55.0, 105.0, 80.0], np.float32)
-    texture[:] = grass * (1.0 + 0.18 * coarse[..., None] + 0.12 * fine[..., None])
-    # Gravel shoulders.
-    shoulder = ((x_m > ROAD_RIGHT_M) & (x_m < ROAD_RIGHT_M + 0.8)) | (
-        (x_m < ROAD_LEFT_M) & (x_m > ROAD_LEFT_M - 0.6))
-    texture[:, shoulder] = (np.array([110.0, 120.0, 125.0], np.float32)
-                            * (1.0 + 0.15 * fine[:, shoulder, None]))
-    # Asphalt with patches and cracks.
-    road = (x_m >= ROAD_LEFT_M) & (x_m <= ROAD_RIGHT_M)
-    asphalt = 95.0 + 9.0 * coarse[:, road] + 7.0 * fine[:, road]
-    texture[:, road] = asphalt[..., None] * np.array([1.0, 0.98, 0.96], np.float32)
-    # Markings: solid edge lines, dashed centre line (3 m dash every 12 m).
-    paint = np.array([210.0, 212.0, 215.0], np.float32)
-    for centre_m in (ROAD_RIGHT_M - 0.1, ROAD_LEFT_M + 0.1):
-        texture[:, np.abs(x_m - centre_m) < 0.075] = paint
-    dash_rows = np.mod(z_m, 12.0) < 3.0
-    centre_cols = np.abs(x_m - (ROAD_RIGHT_M - LANE_WIDTH_M)) < 0.075
-    texture[np.ix_(dash_rows, centre_cols)] = paint
-    return np.clip(texture * (1.0 + 0.04 * fine[..., None]), 0, 255).astype(np.float32)
-
-
-def _far_texture(rng: np.random.Generator) -> np.ndarray:
-    """Sky, clouds and the far treeline/buildings: (rows = tan elevation high->low,
-    columns = azimuth, 3) float32 BGR."""
-    rows, cols = FAR_SIZE
-    tan_e = FAR_TAN_HIGH - (np.arange(rows, dtype=np.float32) + 0.5) / rows * (
-        FAR_TAN_HIGH - FAR_TAN_LOW)
-    sky_t = np.clip(tan_e / 0.5, 0.0, 1.0)[:, None, None]
-    horizon_colour = np.array([225.0, 210.0, 195.0], np.float32)
-    zenith_colour = np.array([205.0, 150.0, 95.0], np.float32)
-    texture = np.broadcast_to(horizon_colour * (1 - sky_t) + zenith_colour * sky_t,
-                              (rows, cols, 3)).copy()
-    clouds = _periodic_noise(rng, (rows, cols), 25.0)
-    cloud_weight = np.clip(clouds - 0.6, 0.0, 1.0)[..., None] * 0.8
-    texture = texture * (1 - cloud_weight) + 240.0 * cloud_weight
-    # Skyline: smooth treeline with blocks of buildings.
-    profile = _periodic_noise(rng, (1, cols), 15.0)[0]
-    skyline = 0.015 + 0.012 * (profile - profile.min())
-    block = 0
-    while block < cols:
-        width = int(rng.integers(40, 160))
-        if rng.uniform() < 0.25:
-            skyline[block:block + width] = np.maximum(skyline[block:block + width],
-                                                      rng.uniform(0.03, 0.07))
-        block += width
-    fine = _periodic_noise(rng, (rows, cols), 1.5)
-    below = tan_e[:, None] < skyline[None, :]
-    treeline = np.array([60.0, 80.0, 65.0], np.float32) * (1.0 + 0.2 * fine[..., None])
-    texture[below] = treeline[below]
-    return np.ascontiguousarray(texture, dtype=np.float32)
-
-
-def _headlight_pool(width: int, height: int) -> np.ndarray:
-    """Relative illumination of the headlights, (H, W) float32 in [0, 1]."""
-    cols, rows = np.meshgrid(np.linspace(-1.0, 1.0, width, dtype=np.float32),
-                             np.linspace(0.0, 1.0, height, dtype=np.float32))
-    pool = np.exp(-(cols / 0.55) ** 2) * np.clip((rows - 0.45) / 0.25, 0.0, 1.0)
-    return pool.astype(np.float32)
-
-
-# ---------------------------------------------------------------------- lighting
-def _background_gain(darkness: float) -> float:
-    """Overall brightness of the scene: 1 by day, ~0.55 at dusk, ~0.12 at night."""
-    if darkness <= 0.5:
-        return 1.0 - 0.9 * darkness
-    return 0.55 - 0.86 * (darkness - 0.5)
-
-
-def _apply_lighting(image: np.ndarray, darkness: float, headlight: np.ndarray) -> np.ndarray:
-    """Scene brightness, dusk tint, night headlights and raised black level."""
-    dusk = 1.0 - abs(darkness - 0.5) * 2.0
-    night = float(np.clip((darkness - 0.5) * 2.0, 0.0, 1.0))
-    tint = np.array([1.0 - 0.25 * dusk + 0.05 * night, 1.0 - 0.08 * dusk,
-                     1.0 + 0.06 * dusk - 0.05 * night], np.float32)
-    gain = _background_gain(darkness) + night * 0.45 * headlight
-    lit = image * gain[..., None] * tint
-    return lit + 10.0 * night
+        composite(image, origin_u, origin_v, lit, alpha)
 
 
 def _shake_blur(image: np.ndarray, pose: _Pose, focal_px: float, exposure_s: float
                 ) -> np.ndarray:
     """Blur along the image motion caused by the camera's rotation."""
-    kernel = _line_kernel(focal_px * pose.yaw_rate * exposure_s,
-                          focal_px * pose.pitch_rate * exposure_s)
+    kernel = line_kernel(focal_px * pose.yaw_rate * exposure_s,
+                         focal_px * pose.pitch_rate * exposure_s)
     return image if kernel is None else cv2.filter2D(image, -1, kernel)
-
-
-def _line_kernel(dx_px: float, dy_px: float) -> np.ndarray | None:
-    """Normalised kernel of a straight motion path, None when shorter than a pixel."""
-    length = math.hypot(dx_px, dy_px)
-    if length < 1.0:
-        return None
-    size = 2 * int(math.ceil(length / 2.0)) + 1
-    kernel = np.zeros((size, size), np.float32)
-    centre = size // 2
-    steps = max(2, int(math.ceil(length * 4)))
-    for t in np.linspace(-0.5, 0.5, steps):
-        x, y = centre + t * dx_px, centre + t * dy_px
-        x0, y0 = int(math.floor(x)), int(math.floor(y))
-        fx, fy = x - x0, y - y0
-        for xi, yi, w in ((x0, y0, (1 - fx) * (1 - fy)), (x0 + 1, y0, fx * (1 - fy)),
-                          (x0, y0 + 1, (1 - fx) * fy), (x0 + 1, y0 + 1, fx * fy)):
-            if 0 <= xi < size and 0 <= yi < size:
-                kernel[yi, xi] += w
-    return kernel / kernel.sum()
-
-
-# ---------------------------------------------------------------------- primitives
-def _fill_rect(image: np.ndarray, x1: float, y1: float, x2: float, y2: float,
-               colour: tuple[float, ...]) -> None:
-    height, width = image.shape[:2]
-    left, right = max(0, int(round(x1))), min(width, int(round(x2)))
-    top, bottom = max(0, int(round(y1))), min(height, int(round(y2)))
-    if right <= left:
-        right = min(width, left + 1)
-    if right > left and bottom > top:
-        image[top:bottom, left:right] = colour
-
-
-def _fill_ellipse(image: np.ndarray, x: float, y: float, rx: float, ry: float,
-                  colour: tuple[float, ...]) -> None:
-    """Anti-aliased filled ellipse (sub-pixel centre and radii) on a float image."""
-    if rx < 0.3 or ry < 0.3:
-        return
-    height, width = image.shape[:2]
-    left, right = max(0, int(x - rx - 1)), min(width, int(x + rx + 2))
-    top, bottom = max(0, int(y - ry - 1)), min(height, int(y + ry + 2))
-    if right <= left or bottom <= top:
-        return
-    cols = np.arange(left, right, dtype=np.float32) + 0.5 - x
-    rows = np.arange(top, bottom, dtype=np.float32) + 0.5 - y
-    distance = np.sqrt((cols[None, :] / rx) ** 2 + (rows[:, None] / ry) ** 2)
-    coverage = np.clip((1.0 - distance) * min(rx, ry) + 0.5, 0.0, 1.0)[..., None]
-    region = image[top:bottom, left:right]
-    region[:] = region * (1.0 - coverage) + np.asarray(colour, np.float32) * coverage
-
-
-def _add_glow(image: np.ndarray, x: float, y: float, radius: float, strength: float,
-              colour: tuple[float, float, float] = (0.8, 0.95, 1.0)) -> None:
-    """Emissive light: a bright disc with a soft halo, added to the image."""
-    reach = radius * 4.0 + 3.0
-    height, width = image.shape[:2]
-    left, right = max(0, int(x - reach)), min(width, int(x + reach + 1))
-    top, bottom = max(0, int(y - reach)), min(height, int(y + reach + 1))
-    if right <= left or bottom <= top:
-        return
-    cols = np.arange(left, right, dtype=np.float32) + 0.5 - x
-    rows = np.arange(top, bottom, dtype=np.float32) + 0.5 - y
-    distance = np.sqrt(cols[None, :] ** 2 + rows[:, None] ** 2)
-    core = np.clip(radius + 0.5 - distance, 0.0, 1.0)
-    halo = np.exp(-(distance / max(radius * 1.5, 1.0)) ** 2) * 0.5
-    glow = (core + halo)[..., None] * strength * np.asarray(colour, np.float32)
-    image[top:bottom, left:right] += glow
-
-
-def _composite(image: np.ndarray, left: int, top: int, premultiplied: np.ndarray,
-               alpha: np.ndarray) -> None:
-    """Alpha-blend a premultiplied patch at (left, top), clipped to the image."""
-    height, width = image.shape[:2]
-    size_v, size_u = alpha.shape
-    x1, y1 = max(0, left), max(0, top)
-    x2, y2 = min(width, left + size_u), min(height, top + size_v)
-    if x2 <= x1 or y2 <= y1:
-        return
-    patch_alpha = alpha[y1 - top:y2 - top, x1 - left:x2 - left, None]
-    patch = premultiplied[y1 - top:y2 - top, x1 - left:x2 - left]
-    region = image[y1:y2, x1:x2]
-    region[:] = region * (1.0 - patch_alpha) + patch
