@@ -53,7 +53,8 @@ bank: $(INSTALLED)
 ## sequences and boxes), leave one value out, the rendered sign designs; make bench adds them
 ## to bench/RESULTS.md. Each is its own target; `make -j2 validate` runs them side by side
 ## in 40 min to 1.5 h on 2 cores, as fast as the host is that day (folds 36-88 min beside
-## leave-one-value-out's 29-75 min, 21 min alone; designs under a minute)
+## leave-one-value-out's 29-75 min, 21 min alone; designs, 30 signs of each value and
+## design, about 3 min alone)
 .PHONY: validate validate-folds validate-value-holdout validate-designs
 validate: validate-folds validate-value-holdout validate-designs
 validate-folds: $(INSTALLED)
@@ -69,7 +70,7 @@ validate-value-holdout: $(INSTALLED)
 validate-designs: $(INSTALLED)
 	mkdir -p $(OUT)/validation
 	$(BIN)/python bench/record_json.py $(OUT)/validation/designs.json -- \
-		$(BIN)/python bench/bench_sign_designs.py --per-value 6 --seed 1 --json
+		$(BIN)/python bench/bench_sign_designs.py --per-value 30 --seed 1 --json
 
 ## bench: accuracy and speed against the peers: results.json, table and plots in out/bench/,
 ## and bench/RESULTS.md generated from them (with the JSON of make validate and make soak

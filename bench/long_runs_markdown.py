@@ -50,7 +50,7 @@ LONG_RUNS: tuple[LongRun, ...] = (
             'speed_sign_train validate ../shared/data/gtsrb-dev '
             '../shared/data/gtsrb-lookalikes-dev --leave-one-value-out --json'),
     LongRun('sign_designs', '--designs', 'Rendered designs', 'make validate',
-            'python bench/bench_sign_designs.py --per-value 6 --seed 1 --json'),
+            'python bench/bench_sign_designs.py --per-value 30 --seed 1 --json'),
     LongRun('soak', '--soak', 'Soak', 'make soak',
             'python bench/bench_soak.py --minutes 60 --width 1280 --height 720 --json'),
 )

@@ -273,7 +273,7 @@ def test_designs_rows_and_the_wrong_number(markdown: ModuleType) -> None:
     assert per_value[0] == ['value', 'painted, white face', 'LED, dot matrix', 'end of limit']
     assert row_starting(per_value, '130')[1:] == ['6/6', '4/6, **1 wrong**', '6/6']
     assert '130 as 120 (17 px) x1' in part
-    assert 'bench_sign_designs.py --per-value 6 --seed 1 --json' in part
+    assert 'bench_sign_designs.py --per-value 30 --seed 1 --json' in part
 
 
 def test_soak_rows_against_the_targets(markdown: ModuleType) -> None:

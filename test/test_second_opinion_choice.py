@@ -173,3 +173,26 @@ def test_second_opinion_never_turns_a_limit_into_an_end_of_limit() -> None:
     assert opinion.choose(reads_end, [END_OF_LIMIT_LABEL, '20'], 2, 0.2) == END_OF_LIMIT_LABEL
     assert opinion.choose(reads_end, ['other_sign', END_OF_LIMIT_LABEL], 2,
                           0.2) == END_OF_LIMIT_LABEL
+
+
+def test_a_sign_read_inverted_keeps_an_unseen_leader_only_as_the_models_best() -> None:
+    """No real crop shows an electronic sign: the model learned every value of that
+    design from renderings alike, so on a sign read inverted (``lit_on_dark``) the
+    correlation's leader known from renderings only (40) stands only where the model reads
+    it too, not where the model ranks it a distant fourth behind the 60 the correlation
+    found nearly as well."""
+    opinion = _opinion(('40', '60', '80', 'no_sign', 'other_sign'),
+                       ('60', '80', 'no_sign', 'other_sign'))
+    reads_sixty = np.asarray([-0.9, 0.9, -0.95, -0.95, -1.0])  # 40 at 1.8 below, 2nd
+    ranked = ['40', '60', '80']
+    correlation = [('40', 12.1), ('60', 11.5), ('80', 10.5)]
+    assert opinion.choose(reads_sixty, ranked, 4, 0.6, 1.2, correlation) == '40'
+    assert opinion.choose(reads_sixty, ranked, 4, 0.6, 1.2, correlation,
+                          lit_on_dark=True) is None  # withheld, not turned into 60
+    reads_forty = np.asarray([0.8, -0.8, -0.95, -0.95, -1.0])
+    assert opinion.choose(reads_forty, ranked, 4, 0.6, 1.2, correlation,
+                          lit_on_dark=True) == '40'
+    # the model's own reading of a real label is untouched by the polarity
+    real_leader = [('60', 12.1), ('80', 9.0)]
+    assert opinion.choose(reads_sixty, ['60', '80'], 4, 0.6, 1.2, real_leader,
+                          lit_on_dark=True) == '60'

@@ -30,7 +30,11 @@ from speed_sign_detector.recognition.correlation import (
     transposed_spectra,
 )
 from speed_sign_detector.recognition.filter_banks import SizeBank
-from speed_sign_detector.recognition.sign_polarity import Polarity, sign_polarity
+from speed_sign_detector.recognition.sign_polarity import (
+    Polarity,
+    painted_polarity,
+    sign_polarity,
+)
 
 
 #: A candidate whose polarity is unsure (:attr:`.Polarity.UNSURE`: it may be an electronic
@@ -96,7 +100,8 @@ class _Position:
     radius_scaled: float  # the sign's expected radius, ROI pixels
     indices: list[int]  # bank indices of the detection filters searched
     largest: int  # ROI side, pixels (largest FFT size of those banks)
-    raw: np.ndarray  # (largest, largest) uint8 ROI
+    raw: np.ndarray  # (largest, largest) uint8 ROI, as correlated
+    lit: np.ndarray  # the same ROI as the image shows it (before any inversion)
     enhanced: np.ndarray  # the same after CLAHE (or ``raw``)
     inverted: bool  # the ROI is the image inverted (a sign lit on a dark face)
     # read painted, but it may be lit on a dark face (:attr:`.Polarity.UNSURE`)
@@ -248,20 +253,23 @@ class EvidenceSearch:
         largest = max(self.banks[i].fft_size for i in indices)
         raw, scale = _roi(gray, x_px, y_px, largest, scale)
         # an electronic sign (lit on a dark face) is read inverted: the polarity of the
-        # painted templates (the test on the ROI, centred on the position)
+        # painted templates, its lamps' bloom damped (the test on the ROI, centred on the
+        # position)
         polarity = sign_polarity(raw, largest / 2.0, largest / 2.0, radius_px * scale)
         inverted = polarity is Polarity.LIT_ON_DARK
+        lit = raw
         if inverted:
-            raw = 255 - raw
+            raw = painted_polarity(raw)
         return _Position(x_px, y_px, radius_px, scale, radius_scaled, indices, largest, raw,
-                         self._enhance(raw), inverted, polarity is Polarity.UNSURE)
+                         lit, self._enhance(raw), inverted, polarity is Polarity.UNSURE)
 
     def _inverted(self, position: _Position) -> _Position:
-        """A fresh, unsearched copy of a position read painted, its ROI inverted."""
-        raw = 255 - position.raw
+        """A fresh, unsearched copy of a position read painted, its ROI inverted
+        (:func:`.sign_polarity.painted_polarity`)."""
+        raw = painted_polarity(position.lit)
         return _Position(position.x_px, position.y_px, position.radius_px, position.scale,
                          position.radius_scaled, position.indices, position.largest, raw,
-                         self._enhance(raw), True)
+                         position.lit, self._enhance(raw), True)
 
     def _enhance(self, raw: np.ndarray) -> np.ndarray:
         """The ROI after CLAHE (``raw`` itself without CLAHE)."""

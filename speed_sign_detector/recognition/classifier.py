@@ -430,7 +430,8 @@ class Classifier:
                                     config.second_opinion_overrule_lead,
                                     [(name, psr) for name, (_, psr) in
                                      zip(labels, evidence.ranked)],
-                                    config.crop_rendered_only_min_score if crop else None)
+                                    config.crop_rendered_only_min_score if crop else None,
+                                    lit_on_dark=evidence.inverted)
             if (choice is not None and not crop and choice.isdigit()
                     and choice not in opinion.labels_with_crops
                     and top_psr < config.frame_value_without_crops_min_psr):

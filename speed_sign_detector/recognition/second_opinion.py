@@ -22,7 +22,11 @@ value, rank such signs right far more often. Hence:
   :data:`RENDERED_ONLY_MAX_RANK` + 1 best labels within :data:`RENDERED_ONLY_MAX_GAP` of
   its best score, its best label not "other sign"; otherwise the answer is withheld,
   never turned into another limit. A crop frames a sign, so there the floor for the
-  model's own best label is lower (``classifier.crop_rendered_only_min_score``).
+  model's own best label is lower (``classifier.crop_rendered_only_min_score``). A sign
+  read inverted (lit on a dark face, an electronic sign) is another matter: no real crop
+  of any value shows that design, the model learned every value of it from renderings
+  alike (:func:`.sign_designs.design_training_crops`), so it can vouch against such a
+  class there as well as against any other: the leader stands only as the model's best.
 - Where the correlation finds such a class nearly as well as its leading limit (within
   :data:`UNSEEN_RUNNER_UP_PSR`), the model cannot tell the two apart: withheld.
 - Overruling the correlation's leading limit with another limit where either is known
@@ -180,7 +184,8 @@ class SecondOpinion:
     def choose(self, scores: np.ndarray, ranked_labels: Sequence[str], candidates: int,
                min_lead: float, overrule_lead: float = 0.0,
                correlation: Sequence[tuple[str, float]] = (),
-               rendered_only_floor: float | None = None) -> str | None:
+               rendered_only_floor: float | None = None, lit_on_dark: bool = False
+               ) -> str | None:
         """The label to answer for one sign, or ``None`` to withhold.
 
         Args:
@@ -198,6 +203,9 @@ class SecondOpinion:
                 the least score for a correlation leader known from renderings only that
                 is also the model's best label (a crop, which frames a sign, needs no
                 guard against clutter); ``None``: the form's floor.
+            lit_on_dark: the sign was read inverted (an electronic sign lit on a dark
+                face): a correlation leader known from renderings only stands only where
+                it is the model's best label.
 
         Returns:
             One of ``ranked_labels`` or ``None``.
@@ -211,7 +219,8 @@ class SecondOpinion:
         order = np.argsort(-scores)
         leader = distinct[0]
         if leader not in self.real_labels:
-            if self._reads_rendered_only(scores, order, leader, rendered_only_floor):
+            if self._reads_rendered_only(scores, order, leader, rendered_only_floor,
+                                         lit_on_dark):
                 return leader
             if leader.isdigit():
                 # a model that never saw this value's real pixels rejects them on weak
@@ -256,10 +265,12 @@ class SecondOpinion:
         return self.real_labels if self.crop_labels is None else self.crop_labels
 
     def _reads_rendered_only(self, scores: np.ndarray, order: np.ndarray, label: str,
-                             lower_floor: float | None = None) -> bool:
+                             lower_floor: float | None = None, lit_on_dark: bool = False
+                             ) -> bool:
         """Whether the model's ``scores`` let the correlation's answer ``label``, a class
-        it learned from renderings only, stand (see the module's rules; ``lower_floor``:
-        :meth:`choose`'s ``rendered_only_floor``)."""
+        it learned from renderings only, stand (see the module's rules; ``lower_floor``
+        and ``lit_on_dark``: :meth:`choose`'s ``rendered_only_floor`` and
+        ``lit_on_dark``)."""
         if label not in self.labels:
             return False
         index = self.labels.index(label)
@@ -270,6 +281,8 @@ class SecondOpinion:
             floor = min(floor, lower_floor)
         if best == index:
             return float(scores[index]) >= floor
+        if lit_on_dark:
+            return False  # the model learned this design of every value alike
         rank = int(np.sum(scores > scores[index]))
         return (rank <= RENDERED_ONLY_MAX_RANK
                 and float(scores[best] - scores[index]) <= RENDERED_ONLY_MAX_GAP
