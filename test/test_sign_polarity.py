@@ -91,8 +91,9 @@ def test_painted_polarity_inverts_and_damps_the_glow() -> None:
     than a plain inversion makes it (closer to the face than to the strokes)."""
     assert BLOOM_GAMMA > 1.0
     ramp = np.tile(np.arange(256, dtype=np.uint8), (8, 1))
-    painted = painted_polarity(ramp).astype(int)
-    assert painted.dtype == np.int64 and painted.shape == ramp.shape
+    returned = painted_polarity(ramp)
+    assert returned.dtype == np.uint8 and returned.shape == ramp.shape
+    painted = returned.astype(int)
     assert painted[:, :20].min() == 255 and painted[:, -1].max() == 0
     assert np.all(np.diff(painted[0]) <= 0)  # brighter stays darker
     glow = (ramp[0] > 60) & (ramp[0] < 200)
@@ -102,8 +103,8 @@ def test_painted_polarity_inverts_and_damps_the_glow() -> None:
 
 
 @pytest.mark.parametrize('design', ['led', 'led_amber', 'led_dot_matrix'])
-def test_blooming_led_sixes_are_not_read_as_forty(classifier: Classifier, design: str
-                                                   ) -> None:
+def test_blooming_led_sixes_are_not_read_as_forty(classifier: Classifier,
+                                                  design: str) -> None:
     """Over-exposed LED 60s and 80s whose glow fills the digits' counters: the correlation
     finds a 40 in them about as well as their value, and the model, which learned every
     value of an LED sign from renderings alike, reads their value. They are read as their
