@@ -61,9 +61,9 @@ import numpy as np
 
 from speed_sign_detector.config import DetectorConfig
 from speed_sign_detector.detection.candidates import BlockMaxima, score_normaliser
+from speed_sign_detector.detection.gl_unlocked_calls import UnlockedGLCalls
 from speed_sign_detector.detection.gradients import SUPPORT_ANGLE_DEG, gray_lookup
 from speed_sign_detector.detection.vote_fixed_point import VoteFixedPoint, vote_fixed_point
-from speed_sign_detector.detection.gl_unlocked_calls import UnlockedGLCalls
 from speed_sign_detector.detection.voting_numpy import (
     CHANNELS,
     SPREAD,
