@@ -11,6 +11,7 @@ from speed_sign_detector.recognition.second_opinion import (
     CANDIDATE_PSR_GAP,
     COMPOSITE_ONLY_ANSWER_LEAD,
     COMPOSITE_ONLY_OVERRULE_LEAD,
+    COMPOSITE_ONLY_RUNNER_UP_PSR,
     END_OF_LIMIT_LABEL,
     RENDERED_ONLY_MAX_GAP,
     RENDERED_ONLY_MAX_RANK,
@@ -54,6 +55,11 @@ def test_second_opinion_chooses_only_among_ranked_real_labels() -> None:
                         0.2) is None                                   # 5th of the model's
     reads_no_sign = np.asarray([-0.9, -0.9, -0.9, -0.3, 0.9])           # best: other sign
     assert opinion.choose(reads_no_sign, ['130', '30'], 2, 0.2) is None
+    # nor where its best label is "no sign" (clutter: a look-alike read as a 40)
+    clutter = _opinion(('30', '40', 'no_sign', 'other_sign'), ('30', 'no_sign', 'other_sign'))
+    assert clutter.choose(np.asarray([-1.0, -0.9, 0.6, -0.6]), ['40', '30'], 2, 0.2) is None
+    assert clutter.choose(np.asarray([-1.0, -0.4, -0.9, 0.6]), ['40', '30'], 2, 0.2) is None
+    assert clutter.choose(np.asarray([0.6, -0.4, -0.9, -0.6]), ['40', '30'], 2, 0.2) == '40'
     # a real winner may still be overruled by a real runner-up with a clear lead ...
     assert opinion.choose(scores, ['70', '30'], 2, 0.2, overrule_lead=0.5) == '30'
     # ... but a lead under overrule_lead withholds a limit the two disagree on
@@ -139,8 +145,36 @@ def test_overruling_a_value_known_from_composites_only_needs_a_clear_lead() -> N
     # agreeing with the correlation on it needs COMPOSITE_ONLY_ANSWER_LEAD (next test)
     assert opinion.choose(np.asarray([-1.0, -0.9, 0.9, -1.0]), ['120', '100'], 2, 0.2,
                           1.0) == '120'
+    # a model all but certain (lead 1.96: both scores near the ends of their range)
+    # overrules; just under COMPOSITE_ONLY_OVERRULE_LEAD it does not
+    assert 1.9 < COMPOSITE_ONLY_OVERRULE_LEAD < 1.96
+    assert opinion.choose(np.asarray([-1.0, 0.98, -0.98, -1.0]), ['120', '100'], 2, 0.2,
+                          1.0) == '100'
+    assert opinion.choose(np.asarray([-1.0, 0.93, -0.98, -1.0]), ['120', '100'], 2, 0.2,
+                          1.0) is None
     # banks that do not record their crop labels treat every real label as one
     assert _opinion(labels, labels).choose(reads_100, ['120', '100'], 2, 0.2, 1.0) == '100'
+
+
+def test_a_three_digit_answer_close_to_a_three_digit_composite_value_is_withheld() -> None:
+    """A 100 or 120 (real crops) is withheld where the correlation finds a three-digit
+    value known from composites only (130) within COMPOSITE_ONLY_RUNNER_UP_PSR of it: a
+    small 130 whose middle digit the model reads as a 0."""
+    labels = ('30', '100', '130', 'other_sign')
+    opinion = dataclasses.replace(_opinion(labels, labels),
+                                  crop_labels=('30', '100', 'other_sign'))
+    reads_100 = np.asarray([-1.0, 0.9, -0.9, -1.0])
+    close = COMPOSITE_ONLY_RUNNER_UP_PSR - 0.1
+    far = COMPOSITE_ONLY_RUNNER_UP_PSR + 0.1
+    ranked = ['100', '130', '30']
+    assert opinion.choose(reads_100, ranked, 3, 0.2, 1.0,
+                          [('100', 10.0), ('130', 10.0 - close), ('30', 7.0)]) is None
+    assert opinion.choose(reads_100, ranked, 3, 0.2, 1.0,
+                          [('100', 10.0), ('130', 10.0 - far), ('30', 7.0)]) == '100'
+    # two-digit answers are not concerned (their partners are LONGER_PARTNERS' business)
+    reads_30 = np.asarray([0.9, -0.9, -0.9, -1.0])
+    assert opinion.choose(reads_30, ['30', '130'], 3, 0.2, 1.0,
+                          [('30', 10.0), ('130', 10.0 - close)]) == '30'
 
 
 def test_answering_a_value_known_from_composites_only_needs_a_clear_lead() -> None:
@@ -180,7 +214,7 @@ def test_a_sign_read_inverted_keeps_an_unseen_leader_only_as_the_models_best() -
     design from renderings alike, so on a sign read inverted (``lit_on_dark``) the
     correlation's leader known from renderings only (40) stands only where the model reads
     it too, not where the model ranks it a distant fourth behind the 60 the correlation
-    found nearly as well."""
+    found nearly as well; the model's own choice then stands on the usual rules."""
     opinion = _opinion(('40', '60', '80', 'no_sign', 'other_sign'),
                        ('60', '80', 'no_sign', 'other_sign'))
     reads_sixty = np.asarray([-0.9, 0.9, -0.95, -0.95, -1.0])  # 40 at 1.8 below, 2nd
@@ -189,6 +223,11 @@ def test_a_sign_read_inverted_keeps_an_unseen_leader_only_as_the_models_best() -
     assert opinion.choose(reads_sixty, ranked, 4, 0.6, 1.2, correlation) == '40'
     assert opinion.choose(reads_sixty, ranked, 4, 0.6, 1.2, correlation,
                           lit_on_dark=True) is None  # withheld, not turned into 60
+    # there the model's own choice is judged as any other: an overrule of a leader known
+    # from renderings only needs COMPOSITE_ONLY_OVERRULE_LEAD
+    sure_sixty = np.asarray([-0.99, 0.99, -0.99, -0.99, -1.0])
+    assert opinion.choose(sure_sixty, ranked, 4, 0.6, 1.2, correlation,
+                          lit_on_dark=True) == '60'
     reads_forty = np.asarray([0.8, -0.8, -0.95, -0.95, -1.0])
     assert opinion.choose(reads_forty, ranked, 4, 0.6, 1.2, correlation,
                           lit_on_dark=True) == '40'
