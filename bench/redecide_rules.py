@@ -1,0 +1,208 @@
+#!/usr/bin/env python3
+"""Try decision-rule changes in seconds: record the looks of the validation runs once, then
+decide them again with the rules as the code has them now.
+
+``record`` trains the banks of the 5 folds by track (with ``--scenes``, as
+``make validate-folds`` does) or of leave one value out (as ``make
+validate-value-holdout``, without scenes), and records every look at every crop each bank measures
+(:mod:`speed_sign_detector.training.recorded_looks`) into one pickle file (about 50 MB for
+the folds, 85 MB for leave one value out; 15-20 min each on 2 cores). ``replay`` decides
+the recorded looks again and prints the figures of the run: the folds' accuracy, crops
+read as another limit per class and look-alikes read as a limit; per held-out value its
+crops read right and as another limit. ``--set NAME=VALUE`` changes a constant of
+``recognition/second_opinion.py`` (``UNSEEN_RUNNER_UP_PSR=1.0``) or a classifier
+parameter (``classifier.min_margin=2``) for that replay. With the rules unchanged the
+replay gives the recorded answers (it checks this and says so).
+
+The pickle holds the banks and numpy arrays: read only files you made.
+
+Usage::
+
+    python bench/redecide_rules.py record folds out/looks_folds.pkl \\
+        ../shared/data/gtsrb-dev ../shared/data/gtsrb-lookalikes-dev \\
+        --scenes ../shared/data/gtsdb-dev
+    python bench/redecide_rules.py record values out/looks_values.pkl \\
+        ../shared/data/gtsrb-dev ../shared/data/gtsrb-lookalikes-dev
+    python bench/redecide_rules.py replay out/looks_folds.pkl out/looks_values.pkl \\
+        [--set UNSEEN_RUNNER_UP_PSR=1.0] [--json]
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import pickle
+import sys
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+from speed_sign_detector.blas_threads import use_one_blas_thread
+
+use_one_blas_thread()  # reproducible training, as make bank
+
+import numpy as np  # noqa: E402
+
+from speed_sign_detector.config import ClassifierConfig, DetectorConfig  # noqa: E402
+from speed_sign_detector.labelled_crops import track_folds  # noqa: E402
+from speed_sign_detector.recognition import second_opinion  # noqa: E402
+from speed_sign_detector.recognition.classifier import Classifier  # noqa: E402
+from speed_sign_detector.training.bank_training import (  # noqa: E402
+    TrainingConfig,
+    locate_rendered,
+    locate_signs,
+    read_crops,
+    rendered_classifier,
+    scene_examples_of,
+    train_from_located,
+)
+from speed_sign_detector.training.recorded_looks import record_looks, redecide  # noqa: E402
+from speed_sign_detector.training.track_validation import answer_is_limit, summarise  # noqa: E402
+from speed_sign_detector.training.value_holdout import value_answers  # noqa: E402
+
+FOLDS = 5
+
+
+def record(mode: str, out: Path, folders: list[Path], scenes: list[Path],
+           values: list[str] | None, config: TrainingConfig = TrainingConfig(),
+           classifier_config: ClassifierConfig = ClassifierConfig()) -> None:
+    """Train the runs' banks (``mode`` ``'folds'`` or ``'values'``) by the recipe
+    ``config`` and write their recorded looks to ``out``."""
+    crops, images, unreadable = read_crops(folders)
+    for path in unreadable:
+        print(f'unreadable: {path}', file=sys.stderr)
+    fold_of = track_folds(crops, FOLDS, config.seed)
+    rendered = rendered_classifier(classifier_config)
+    located = locate_signs(rendered, crops, images)
+    rendered_crops = locate_rendered(rendered, config)
+    _, scene_examples = scene_examples_of(scenes, rendered, DetectorConfig(), config, 'auto')
+    labels = np.asarray([crop.label for crop in crops])
+    runs: list[tuple[str, np.ndarray, np.ndarray]] = []
+    if mode == 'folds':
+        runs = [(f'fold {fold}', fold_of != fold, np.flatnonzero(fold_of == fold))
+                for fold in range(FOLDS)]
+    else:
+        limits = sorted({label for label in labels if label.isdigit()}, key=int)
+        for value in values or limits:
+            if value not in limits:
+                raise SystemExit(f'no real crops of {value} km/h in {folders}')
+            fold = limits.index(value) % FOLDS  # as value_holdout.hold_out_values
+            runs.append((f'value {value}', (fold_of != fold) & (labels != value),
+                         np.concatenate([np.flatnonzero(labels == value),
+                                         np.flatnonzero((fold_of == fold) & (labels != value))])))
+    recorded: dict[str, Any] = {'mode': mode, 'runs': {}}
+    for name, train, measured in runs:
+        bank = train_from_located(located.subset(train), config, rendered=rendered_crops,
+                                  scenes=scene_examples if mode == 'folds' else None)
+        trained = Classifier(classifier_config, bank)
+        rows = []
+        for index in measured:
+            looks = record_looks(trained, images[index])
+            rows.append({'label': crops[index].label, 'class_id': crops[index].class_id,
+                         'width': crops[index].roi[2] - crops[index].roi[0] + 1,
+                         'looks': looks,
+                         'answer': trained.decide_crop(images[index], looks.first).label})
+        recorded['runs'][name] = {'bank': bank, 'rows': rows}
+        print(f'{name}: {len(rows)} crops recorded', file=sys.stderr)
+    with open(out, 'wb') as file:
+        pickle.dump(recorded, file)
+
+
+def replay(path: Path, classifier_config: ClassifierConfig) -> dict[str, Any]:
+    """The figures of one recorded run decided again."""
+    with open(path, 'rb') as file:
+        recorded = pickle.load(file)
+    changed = 0
+    figures: dict[str, Any] = {'mode': recorded['mode'], 'runs': {}}
+    everything: list[tuple[str, str, int, int]] = []
+    for name, run in recorded['runs'].items():
+        classifier = Classifier(classifier_config, run['bank'])
+        answers = [redecide(classifier, row['looks']).label for row in run['rows']]
+        changed += sum(answer != row['answer'] for answer, row in zip(answers, run['rows']))
+        rows = [(row['label'], answer, row['class_id'], row['width'])
+                for row, answer in zip(run['rows'], answers)]
+        if recorded['mode'] == 'folds':
+            everything += rows
+            figures['runs'][name] = summarise(*map(list, zip(*rows)))['accuracy']
+        else:
+            value = name.split()[-1]
+            figures['runs'][name] = value_answers(value, [a for t, a, _, _ in rows
+                                                          if t == value])
+    if recorded['mode'] == 'folds':
+        truths, answers = [row[0] for row in everything], [row[1] for row in everything]
+        per_class = Counter(truths)
+        wrong = Counter(truth for truth, answer in zip(truths, answers)
+                        if truth.isdigit() and answer_is_limit(answer) and answer != truth)
+        figures['accuracy_mean'] = float(np.mean(list(figures['runs'].values())))
+        figures['wrong_limit_rate'] = {c: wrong[c] / per_class[c] for c in sorted(
+            per_class, key=lambda c: (not c.isdigit(), int(c) if c.isdigit() else 0, c))
+            if c.isdigit()}
+        figures['lookalikes_read_as_limit'] = sum(
+            answer_is_limit(answer) for truth, answer in zip(truths, answers)
+            if not truth.isdigit() and truth != 'end_of_limit')
+    figures['answers_changed'] = changed
+    return figures
+
+
+def print_figures(path: Path, figures: dict[str, Any]) -> None:
+    print(f'{path} ({figures["answers_changed"]} answers differ from the recorded ones)')
+    if figures['mode'] == 'folds':
+        worst = max(figures['wrong_limit_rate'].items(), key=lambda item: item[1])
+        print(f'  accuracy {figures["accuracy_mean"]:.4f} (folds: '
+              + ', '.join(f'{a:.3f}' for a in figures['runs'].values())
+              + f'); worst class read as another limit {worst[0]} {100 * worst[1]:.2f} %; '
+              f'look-alikes read as a limit {figures["lookalikes_read_as_limit"]}')
+        return
+    for name, held in figures['runs'].items():
+        print(f'  {name}: right {held["accuracy"]:.3f}, another limit '
+              f'{100 * held["wrong_limit_rate"]:.2f} %')
+
+
+def apply_settings(settings: list[str]) -> ClassifierConfig:
+    """Apply ``--set`` values; returns the classifier config to decide with."""
+    classifier_config = ClassifierConfig()
+    for setting in settings:
+        name, _, text = setting.partition('=')
+        if name.startswith('classifier.'):
+            field = name.removeprefix('classifier.')
+            kind = type(getattr(classifier_config, field, None))
+            if kind not in (int, float, bool):
+                raise SystemExit(f'--set {setting}: not a numeric classifier parameter')
+            classifier_config = dataclasses.replace(classifier_config, **{field: kind(text)})
+        elif isinstance(getattr(second_opinion, name, None), (int, float)):
+            setattr(second_opinion, name, float(text))
+        else:
+            raise SystemExit(f'--set {setting}: no such constant in second_opinion.py')
+    return classifier_config
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    commands = parser.add_subparsers(dest='command', required=True)
+    recording = commands.add_parser('record', help='train the banks and record the looks')
+    recording.add_argument('mode', choices=('folds', 'values'))
+    recording.add_argument('out', type=Path)
+    recording.add_argument('folders', type=Path, nargs='+')
+    recording.add_argument('--scenes', type=Path, action='append', default=[])
+    recording.add_argument('--values', nargs='+', help='values to hold out (values mode)')
+    replaying = commands.add_parser('replay', help='decide recorded looks again')
+    replaying.add_argument('records', type=Path, nargs='+')
+    replaying.add_argument('--set', action='append', default=[], metavar='NAME=VALUE')
+    replaying.add_argument('--json', action='store_true')
+    args = parser.parse_args(argv)
+    if args.command == 'record':
+        if args.mode == 'values' and args.scenes:
+            parser.error('values mode trains without scenes, as make validate-value-holdout')
+        record(args.mode, args.out, args.folders, args.scenes, args.values)
+        return 0
+    classifier_config = apply_settings(args.set)
+    results = {str(path): replay(path, classifier_config) for path in args.records}
+    for path, figures in results.items():
+        print_figures(Path(path), figures)
+    if args.json:
+        print(json.dumps(results))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

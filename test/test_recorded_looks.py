@@ -1,0 +1,123 @@
+"""Recorded looks decided again (:mod:`speed_sign_detector.training.recorded_looks`, and
+``bench/redecide_rules.py replay``): the same answers as reading the crops, and rule changes
+taking effect on the record as they do on the crops."""
+from __future__ import annotations
+
+import dataclasses
+import json
+import pickle
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from speed_sign_detector.config import ClassifierConfig
+from speed_sign_detector.recognition import second_opinion
+from speed_sign_detector.recognition.classifier import Classifier
+from speed_sign_detector.recognition.sign_designs import design_crop
+from speed_sign_detector.training.recorded_looks import record_looks, redecide
+from test_bench_smoke import bench_module
+
+
+@pytest.fixture(scope='module')
+def crops() -> list[tuple[str, np.ndarray]]:
+    """Rendered camera crops of several values and designs (small ones, whose first look
+    is often "no sign", among them), and clutter."""
+    rng = np.random.default_rng(5)
+    found = [(kind, design_crop(kind, design, int(rng.integers(15, 45)), rng))
+             for kind in ('30', '60', '80', '100', '130') for design in ('painted', 'led')
+             for _ in range(3)]
+    found.append(('no_sign', rng.integers(0, 255, (40, 40), dtype=np.uint8)))
+    return found
+
+
+@pytest.fixture(scope='module')
+def classifier() -> Classifier:
+    return Classifier(ClassifierConfig())
+
+
+def test_recorded_looks_are_decided_as_the_crops_are(classifier: Classifier, crops) -> None:
+    records = [record_looks(classifier, crop) for _, crop in crops]
+    answers = [classifier.classify_crop(crop).label for _, crop in crops]
+    assert [redecide(classifier, looks).label for looks in records] == answers
+    assert sum(answer == kind for answer, (kind, _) in zip(answers, crops)) >= len(crops) // 2
+    assert any(looks.padded is not None or looks.held is not None for looks in records)
+    # the filters alone decide as the crops' reading without the second opinion does
+    alone = [classifier.decide_crop(crop, looks.first, use_second_opinion=False).label
+             for looks, (_, crop) in zip(records, crops)]
+    assert [redecide(classifier, looks, use_second_opinion=False).label
+            for looks in records] == alone
+
+
+def test_a_rule_changed_after_recording_decides_the_record(classifier: Classifier, crops,
+                                                           monkeypatch) -> None:
+    records = [record_looks(classifier, crop) for _, crop in crops]
+    before = [redecide(classifier, looks).label for looks in records]
+    assert any(label.isdigit() for label in before)
+    # a configuration change: no PSR is enough for the second opinion
+    strict = Classifier(dataclasses.replace(classifier.config,
+                                            second_opinion_psr_threshold=1000.0),
+                        classifier.trained_bank)
+    assert {redecide(strict, looks).label for looks in records} == {'no_sign'}
+    # a rule constant of second_opinion.py: every answer needs an impossible lead
+    monkeypatch.setattr(second_opinion, 'COMPOSITE_ONLY_ANSWER_LEAD', 3.0)
+    monkeypatch.setattr(second_opinion, 'COMPOSITE_ONLY_OVERRULE_LEAD', 3.0)
+    after = [redecide(classifier, looks).label for looks in records]
+    assert after == [classifier.classify_crop(crop).label for _, crop in crops]
+
+
+def test_the_bench_replays_a_record_and_applies_settings(classifier: Classifier, crops,
+                                                         tmp_path: Path, capsys) -> None:
+    redecide_rules = bench_module('redecide_rules')
+    rows = []
+    for kind, crop in crops:
+        looks = record_looks(classifier, crop)
+        rows.append({'label': kind, 'class_id': 0, 'width': crop.shape[1], 'looks': looks,
+                     'answer': classifier.decide_crop(crop, looks.first).label})
+    path = tmp_path / 'looks.pkl'
+    with open(path, 'wb') as file:
+        pickle.dump({'mode': 'folds', 'runs': {'fold 0': {'bank': classifier.trained_bank,
+                                                         'rows': rows}}}, file)
+    assert redecide_rules.main(['replay', str(path), '--json']) == 0
+    figures = eval_json(capsys.readouterr().out)[str(path)]
+    assert figures['answers_changed'] == 0
+    right = sum(row['answer'] == row['label'] for row in rows)
+    assert 0 < right < len(rows)
+    assert figures['accuracy_mean'] == pytest.approx(right / len(rows))
+    assert redecide_rules.main(['replay', str(path), '--json', '--set',
+                                'classifier.second_opinion_psr_threshold=1000']) == 0
+    strict = eval_json(capsys.readouterr().out)[str(path)]
+    clutter = sum(row['label'] == 'no_sign' for row in rows)  # right: withheld
+    assert strict['accuracy_mean'] == pytest.approx(clutter / len(rows))
+    assert strict['answers_changed'] == sum(row['answer'] != 'no_sign' for row in rows)
+    with pytest.raises(SystemExit):
+        redecide_rules.main(['replay', str(path), '--set', 'NO_SUCH_RULE=1'])
+
+
+def eval_json(output: str) -> dict:
+    """The JSON object on the last line of a script's output."""
+    return json.loads(output.strip().splitlines()[-1])
+
+
+def test_the_bench_records_the_runs_it_replays(tmp_path: Path, capsys) -> None:
+    """``record`` on generated crops (a tiny recipe): the folds by track and one value left
+    out, each replayed with the answers the recording banks gave."""
+    from test_recognition_training import SMALL, write_crop_folder
+    from test_training_value_holdout import TINY
+    redecide_rules = bench_module('redecide_rules')
+    folder = write_crop_folder(tmp_path / 'crops', tracks_per_class=5, per_track=2)
+    folds, values = tmp_path / 'folds.pkl', tmp_path / 'values.pkl'
+    redecide_rules.record('folds', folds, [folder], [], None, TINY, SMALL)
+    redecide_rules.record('values', values, [folder], [], ['30'], TINY, SMALL)
+    with open(folds, 'rb') as file:
+        recorded = pickle.load(file)
+    assert list(recorded['runs']) == [f'fold {fold}' for fold in range(5)]
+    measured = sum(len(run['rows']) for run in recorded['runs'].values())
+    crops = len((folder / 'labels.csv').read_text().splitlines()) - 1
+    assert measured == crops  # every crop measured once, by the fold that never saw it
+    assert redecide_rules.main(['replay', str(folds), str(values), '--json']) == 0
+    results = eval_json(capsys.readouterr().out)
+    assert results[str(folds)]['answers_changed'] == 0
+    assert results[str(values)]['answers_changed'] == 0
+    held = results[str(values)]['runs']['value 30']
+    assert held['crops'] == 10 and held['right'] + held['wrong_limit'] + held['withheld'] == 10
