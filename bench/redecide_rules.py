@@ -6,7 +6,7 @@ decide them again with the rules as the code has them now.
 ``make validate-folds`` does) or of leave one value out (as ``make
 validate-value-holdout``, without scenes), and records every look at every crop each bank measures
 (:mod:`speed_sign_detector.training.recorded_looks`) into one pickle file (about 50 MB for
-the folds, 85 MB for leave one value out; 15-20 min each on 2 cores). ``replay`` decides
+the folds, 85 MB for leave one value out; 12-20 min each on 2 cores). ``replay`` decides
 the recorded looks again and prints the figures of the run: the folds' accuracy, crops
 read as another limit per class and look-alikes read as a limit; per held-out value its
 crops read right and as another limit. ``--set NAME=VALUE`` changes a constant of
