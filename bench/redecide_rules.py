@@ -33,7 +33,6 @@ import dataclasses
 import json
 import pickle
 import sys
-from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -57,7 +56,7 @@ from speed_sign_detector.training.bank_training import (  # noqa: E402
     train_from_located,
 )
 from speed_sign_detector.training.recorded_looks import record_looks, redecide  # noqa: E402
-from speed_sign_detector.training.track_validation import answer_is_limit, summarise  # noqa: E402
+from speed_sign_detector.training.track_validation import summarise  # noqa: E402
 from speed_sign_detector.training.value_holdout import value_answers  # noqa: E402
 
 FOLDS = 5
@@ -129,17 +128,12 @@ def replay(path: Path, classifier_config: ClassifierConfig) -> dict[str, Any]:
             figures['runs'][name] = value_answers(value, [a for t, a, _, _ in rows
                                                           if t == value])
     if recorded['mode'] == 'folds':
-        truths, answers = [row[0] for row in everything], [row[1] for row in everything]
-        per_class = Counter(truths)
-        wrong = Counter(truth for truth, answer in zip(truths, answers)
-                        if truth.isdigit() and answer_is_limit(answer) and answer != truth)
+        summary = summarise(*map(list, zip(*everything)))
         figures['accuracy_mean'] = float(np.mean(list(figures['runs'].values())))
-        figures['wrong_limit_rate'] = {c: wrong[c] / per_class[c] for c in sorted(
-            per_class, key=lambda c: (not c.isdigit(), int(c) if c.isdigit() else 0, c))
-            if c.isdigit()}
-        figures['lookalikes_read_as_limit'] = sum(
-            answer_is_limit(answer) for truth, answer in zip(truths, answers)
-            if not truth.isdigit() and truth != 'end_of_limit')
+        figures['wrong_limit_rate'] = {label: row['wrong_limit_rate'] for label, row
+                                       in summary['per_class'].items() if label.isdigit()}
+        figures['lookalikes_read_as_limit'] = round(
+            (summary['lookalikes_read_as_limit_rate'] or 0.0) * summary['lookalikes'])
     figures['answers_changed'] = changed
     return figures
 

@@ -197,6 +197,13 @@ class Classifier:
                     answers[index] = answer
         return tuple(answers)
 
+    def sign_reading(self, gray: np.ndarray, evidence: CorrelationEvidence) -> SignReading:
+        """The trained bank's reading (:func:`~.sign_reading.read_signs`) of the sign
+        ``evidence`` located in the (H, W) uint8 ``gray``, inverted where the sign was read
+        inverted; the bank must have a second opinion."""
+        return read_signs(self.trained_bank, 255 - gray if evidence.inverted else gray,
+                          [evidence])[0]
+
     def second_look_stands(self, answer: Classification) -> bool:
         """True when an answer from a second look (the larger-size retry of
         :meth:`classify`, a crop's padded and framed retries, :mod:`.crop_reading`)
@@ -420,8 +427,7 @@ class Classifier:
         top_psr = evidence.ranked[0][1]
         withhold = self._withheld_by_filters(None if crop else gray.shape, evidence, opinion)
         if opinion is not None and not withhold:
-            reading = reading or read_signs(
-                self.trained_bank, 255 - gray if evidence.inverted else gray, [evidence])[0]
+            reading = reading or self.sign_reading(gray, evidence)
             # a weak correlation peak needs a clearer second opinion
             min_lead = self.trained_bank.min_lead if top_psr >= config.psr_threshold else \
                 max(self.trained_bank.min_lead, config.second_opinion_low_psr_lead)

@@ -54,7 +54,8 @@ from speed_sign_detector.recognition.crop_framing import (
     padded_fallback_radius,
 )
 
-__all__ = ['CropReader', 'clearest', 'crop_positions', 'decide_crop', 'framed_search_config']
+__all__ = ['CropReader', 'clearest', 'crop_positions', 'decide_crop', 'framed_search_config',
+           'padded_look_radius']
 
 
 class CropReader(Protocol):
@@ -94,6 +95,17 @@ def crop_positions(shape: tuple[int, ...], framing: str, min_radius_px: float
     return [(width / 2.0, height / 2.0, crop_sign_radius(shape, name)) for name in framings]
 
 
+def padded_look_radius(shape: tuple[int, ...], framing: str, min_radius_px: float
+                       ) -> float | None:
+    """The sign radius, pixels, of a crop's second look at the padded radius
+    (:func:`decide_crop`), or ``None`` where a crop of ``shape`` (h, w) framed so gets
+    none: ``'auto'`` framing only, and not where the padded framing is among its first
+    looks already."""
+    if framing != 'auto' or 'padded' in auto_framings(shape, min_radius_px):
+        return None
+    return padded_fallback_radius(shape)
+
+
 def framed_search_config(config: ClassifierConfig) -> ClassifierConfig:
     """``config`` with the size and position search held to a crop's framing, for the
     framed retry."""
@@ -128,8 +140,7 @@ def decide_crop(classifier: CropReader, crop: np.ndarray,
     height, width = crop.shape
     gate = classifier.crop_detection_gate
     min_radius_px = classifier.config.min_sign_radius_px
-    radius = padded_fallback_radius(crop.shape) if framing == 'auto' and 'padded' not in \
-        auto_framings(crop.shape, min_radius_px) else None
+    radius = padded_look_radius(crop.shape, framing, min_radius_px)
     if radius is not None:
         (padded,) = classifier.evidence_for_candidates(
             crop, [(width / 2.0, height / 2.0, radius)], gate)

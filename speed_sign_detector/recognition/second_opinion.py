@@ -276,19 +276,17 @@ class SecondOpinion:
             # an end of limit drops the limit in force: the model confirms one the
             # correlation read, but does not turn a limit the correlation read into one
             return None
-        if correlation and len(model_best) == 3 and model_best.isdigit() \
-                and model_best in crop_labels:
-            answer_psr = next((psr for label, psr in correlation if label == model_best), None)
-            if answer_psr is not None and any(
+        model_psr = next((psr for label, psr in correlation if label == model_best), None)
+        if model_psr is not None and len(model_best) == 3 and model_best.isdigit() \
+                and model_best in crop_labels and any(
                     len(label) == 3 and label.isdigit() and label in self.real_labels
                     and label not in crop_labels
-                    and psr >= answer_psr - COMPOSITE_ONLY_RUNNER_UP_PSR
+                    and psr >= model_psr - COMPOSITE_ONLY_RUNNER_UP_PSR
                     for label, psr in correlation):
-                return None  # perhaps a 130 whose middle digit the model reads as a 0 or 2
-        if correlation and model_best != leader:
-            found_psr = next((psr for label, psr in correlation if label == model_best), None)
-            if found_psr is None or found_psr < correlation[0][1] - CANDIDATE_PSR_GAP:
-                return None  # the filters barely see what the model would answer
+            return None  # perhaps a 130 whose middle digit the model reads as a 0 or 2
+        if correlation and model_best != leader and (
+                model_psr is None or model_psr < correlation[0][1] - CANDIDATE_PSR_GAP):
+            return None  # the filters barely see what the model would answer
         return model_best
 
     @property

@@ -24,9 +24,13 @@ from speed_sign_detector.config import ClassifierConfig
 from speed_sign_detector.recognition.candidate_evidence import CorrelationEvidence
 from speed_sign_detector.recognition.classification import Classification
 from speed_sign_detector.recognition.classifier import Classifier
-from speed_sign_detector.recognition.crop_framing import auto_framings, padded_fallback_radius
-from speed_sign_detector.recognition.crop_reading import clearest, crop_positions, decide_crop
-from speed_sign_detector.recognition.sign_reading import SignReading, read_signs
+from speed_sign_detector.recognition.crop_reading import (
+    clearest,
+    crop_positions,
+    decide_crop,
+    padded_look_radius,
+)
+from speed_sign_detector.recognition.sign_reading import SignReading
 
 __all__ = ['RecordedLooks', 'record_looks', 'redecide']
 
@@ -69,8 +73,7 @@ def record_looks(classifier: Classifier, crop: np.ndarray, first: Evidence | Non
     height, width = crop.shape
     first = classifier.crop_evidence(crop) if first is None else first
     gate = classifier.crop_detection_gate
-    radius = padded_fallback_radius(crop.shape) if config.crop_framing == 'auto' \
-        and 'padded' not in auto_framings(crop.shape, config.min_sign_radius_px) else None
+    radius = padded_look_radius(crop.shape, config.crop_framing, config.min_sign_radius_px)
     padded = None if radius is None else classifier.evidence_for_candidates(
         crop, [(width / 2.0, height / 2.0, radius)], gate)[0]
     held = clearest(classifier.evidence_for_candidates(
@@ -78,7 +81,7 @@ def record_looks(classifier: Classifier, crop: np.ndarray, first: Evidence | Non
         gate, held_to_framing=True)) if config.crop_framed_retry else None
     bank = classifier.trained_bank
     readings = tuple(
-        read_signs(bank, 255 - crop if look.inverted else crop, [look])[0]
+        classifier.sign_reading(crop, look)
         if isinstance(look, CorrelationEvidence) and bank.second_opinion is not None
         else None for look in (first, padded, held))
     return RecordedLooks((height, width), config.crop_framing, first, padded, held,
