@@ -14,7 +14,9 @@ crops read right and as another limit. ``--set NAME=VALUE`` changes a constant o
 parameter (``classifier.min_margin=2``) for that replay. With the rules unchanged the
 replay gives the recorded answers (it checks this and says so).
 
-The pickle holds the banks and numpy arrays: read only files you made.
+The pickle holds the banks and numpy arrays: read only files you made. ``record`` writes
+it after each run (a run that fails keeps the runs before it); ``replay`` reports a file
+that is missing, empty, truncated or not a record, decides the others, and exits 1.
 
 Usage::
 
@@ -43,6 +45,7 @@ use_one_blas_thread()  # reproducible training, as make bank
 import numpy as np  # noqa: E402
 
 from speed_sign_detector.config import ClassifierConfig, DetectorConfig  # noqa: E402
+from speed_sign_detector.errors import TrainingDataError  # noqa: E402
 from speed_sign_detector.labelled_crops import track_folds  # noqa: E402
 from speed_sign_detector.recognition import second_opinion  # noqa: E402
 from speed_sign_detector.recognition.classifier import Classifier  # noqa: E402
@@ -102,15 +105,42 @@ def record(mode: str, out: Path, folders: list[Path], scenes: list[Path],
                          'looks': looks,
                          'answer': trained.decide_crop(images[index], looks.first).label})
         recorded['runs'][name] = {'bank': bank, 'rows': rows}
-        print(f'{name}: {len(rows)} crops recorded', file=sys.stderr)
-    with open(out, 'wb') as file:
+        _write_record(out, recorded)  # after each run: what was recorded is kept
+        print(f'{name}: {len(rows)} crops recorded in {out}', file=sys.stderr)
+
+
+def _write_record(out: Path, recorded: dict[str, Any]) -> None:
+    """Write ``recorded`` to ``out`` whole or not at all (through a file beside it)."""
+    partial = out.with_name(out.name + '.partial')
+    with open(partial, 'wb') as file:
         pickle.dump(recorded, file)
+    partial.replace(out)
+
+
+class RecordError(Exception):
+    """A file that is not a record written by ``record``."""
+
+
+def _read_record(path: Path) -> dict[str, Any]:
+    """The record in ``path``; :class:`RecordError` for a missing, empty, truncated or
+    foreign file."""
+    try:
+        with open(path, 'rb') as file:
+            recorded = pickle.load(file)
+    except (OSError, EOFError, pickle.UnpicklingError, AttributeError, ImportError,
+            ValueError) as err:
+        raise RecordError(f'{path}: not readable as a record ({type(err).__name__}: '
+                          f'{err})') from err
+    if not (isinstance(recorded, dict) and recorded.get('mode') in ('folds', 'values')
+            and isinstance(recorded.get('runs'), dict)):
+        raise RecordError(f'{path}: not a record of redecide_rules.py record')
+    return recorded
 
 
 def replay(path: Path, classifier_config: ClassifierConfig) -> dict[str, Any]:
-    """The figures of one recorded run decided again."""
-    with open(path, 'rb') as file:
-        recorded = pickle.load(file)
+    """The figures of one recorded run decided again (:class:`RecordError` for a file
+    that is not a record)."""
+    recorded = _read_record(path)
     changed = 0
     figures: dict[str, Any] = {'mode': recorded['mode'], 'runs': {}}
     everything: list[tuple[str, str, int, int]] = []
@@ -187,15 +217,26 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == 'record':
         if args.mode == 'values' and args.scenes:
             parser.error('values mode trains without scenes, as make validate-value-holdout')
-        record(args.mode, args.out, args.folders, args.scenes, args.values)
+        try:
+            record(args.mode, args.out, args.folders, args.scenes, args.values)
+        except TrainingDataError as err:
+            print(f'redecide_rules.py record: {err}', file=sys.stderr)
+            return 1
         return 0
     classifier_config = apply_settings(args.set)
-    results = {str(path): replay(path, classifier_config) for path in args.records}
-    for path, figures in results.items():
-        print_figures(Path(path), figures)
+    results: dict[str, Any] = {}
+    failed = 0
+    for path in args.records:
+        try:
+            results[str(path)] = replay(path, classifier_config)
+        except RecordError as err:
+            print(f'redecide_rules.py replay: {err}', file=sys.stderr)
+            failed += 1
+            continue
+        print_figures(path, results[str(path)])
     if args.json:
         print(json.dumps(results))
-    return 0
+    return 1 if failed else 0
 
 
 if __name__ == '__main__':

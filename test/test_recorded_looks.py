@@ -121,3 +121,42 @@ def test_the_bench_records_the_runs_it_replays(tmp_path: Path, capsys) -> None:
     assert results[str(values)]['answers_changed'] == 0
     held = results[str(values)]['runs']['value 30']
     assert held['crops'] == 10 and held['right'] + held['wrong_limit'] + held['withheld'] == 10
+
+
+def test_the_bench_reports_unreadable_records_and_replays_the_rest(
+        classifier: Classifier, crops, tmp_path: Path, capsys) -> None:
+    """A missing, empty, truncated or foreign file is reported by name; the good record
+    beside it is still replayed, and the exit status says something failed."""
+    redecide_rules = bench_module('redecide_rules')
+    kind, crop = crops[0]
+    looks = record_looks(classifier, crop)
+    good = tmp_path / 'good.pkl'
+    redecide_rules._write_record(good, {'mode': 'folds', 'runs': {'fold 0': {
+        'bank': classifier.trained_bank, 'rows': [
+            {'label': kind, 'class_id': 0, 'width': crop.shape[1], 'looks': looks,
+             'answer': classifier.decide_crop(crop, looks.first).label}]}}})
+    assert not (tmp_path / 'good.pkl.partial').exists()
+    empty, truncated, foreign = (tmp_path / name for name in ('empty', 'cut', 'foreign'))
+    empty.write_bytes(b'')
+    truncated.write_bytes(good.read_bytes()[:1000])
+    with open(foreign, 'wb') as file:
+        pickle.dump([1, 2, 3], file)
+    missing = tmp_path / 'missing.pkl'
+    paths = [empty, good, truncated, foreign, missing]
+    assert redecide_rules.main(['replay', *map(str, paths), '--json']) == 1
+    captured = capsys.readouterr()
+    for bad in (empty, truncated, foreign, missing):
+        assert str(bad) in captured.err
+    assert 'not a record of redecide_rules.py record' in captured.err
+    assert list(eval_json(captured.out)) == [str(good)]
+    assert f'{good} (0 answers differ' in captured.out
+
+
+def test_the_bench_says_why_it_cannot_record(tmp_path: Path, capsys) -> None:
+    redecide_rules = bench_module('redecide_rules')
+    empty_folder = tmp_path / 'no_crops'
+    empty_folder.mkdir()
+    out = tmp_path / 'looks.pkl'
+    assert redecide_rules.main(['record', 'folds', str(out), str(empty_folder)]) == 1
+    assert 'no_crops' in capsys.readouterr().err
+    assert not out.exists()
