@@ -44,8 +44,9 @@ test: $(INSTALLED)
 ## bank: rebuild the shipped filter bank from ../shared/data (reproducible: fixed seed, and one
 ## BLAS thread, so that the core count does not change the rounding of the networks' training)
 DATA ?= ../shared/data
+ONE_BLAS_THREAD = OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
 bank: $(INSTALLED)
-	OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 $(BIN)/speed_sign_train build speed_sign_detector/recognition/data/default_bank.npz \
+	$(ONE_BLAS_THREAD) $(BIN)/speed_sign_train build speed_sign_detector/recognition/data/default_bank.npz \
 		$(DATA)/gtsrb-dev $(DATA)/gtsrb-lookalikes-dev --scenes $(DATA)/gtsdb-dev
 
 ## validate: the recognition figures too slow for make bench, as JSON in out/validation/ with
@@ -54,17 +55,18 @@ bank: $(INSTALLED)
 ## to bench/RESULTS.md. Each is its own target; `make -j2 validate` runs them side by side
 ## in 40 min to 1.5 h on 2 cores, as fast as the host is that day (folds 36-88 min beside
 ## leave-one-value-out's 29-75 min, 21 min alone; designs, 30 signs of each value and
-## design, about 3 min alone)
+## design, about 3 min alone). The banks are trained on one BLAS thread, as make bank and
+## bench/redecide_rules.py train them, so that the core count changes no answer
 .PHONY: validate validate-folds validate-value-holdout validate-designs
 validate: validate-folds validate-value-holdout validate-designs
 validate-folds: $(INSTALLED)
 	mkdir -p $(OUT)/validation
-	$(BIN)/python bench/record_json.py $(OUT)/validation/folds.json -- $(BIN)/speed_sign_train \
-		validate $(DATA)/gtsrb-dev $(DATA)/gtsrb-lookalikes-dev --scenes $(DATA)/gtsdb-dev \
-		--approach --boxes --json
+	$(ONE_BLAS_THREAD) $(BIN)/python bench/record_json.py $(OUT)/validation/folds.json -- \
+		$(BIN)/speed_sign_train validate $(DATA)/gtsrb-dev $(DATA)/gtsrb-lookalikes-dev \
+		--scenes $(DATA)/gtsdb-dev --approach --boxes --json
 validate-value-holdout: $(INSTALLED)
 	mkdir -p $(OUT)/validation
-	$(BIN)/python bench/record_json.py $(OUT)/validation/value_holdout.json -- \
+	$(ONE_BLAS_THREAD) $(BIN)/python bench/record_json.py $(OUT)/validation/value_holdout.json -- \
 		$(BIN)/speed_sign_train validate $(DATA)/gtsrb-dev $(DATA)/gtsrb-lookalikes-dev \
 		--leave-one-value-out --json
 validate-designs: $(INSTALLED)

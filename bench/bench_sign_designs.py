@@ -28,6 +28,7 @@ import json
 import sys
 import time
 from collections import Counter, defaultdict
+from collections.abc import Iterator, Sequence
 
 from speed_sign_detector.blas_threads import use_one_blas_thread
 
@@ -66,6 +67,22 @@ def outcome(truth: str, answer: str) -> str:
     return 'withheld'
 
 
+def design_signs(designs: Sequence[str], per_value: int, min_px: int, max_px: int,
+                 rng: np.random.Generator) -> Iterator[tuple[str, str, str, int, np.ndarray]]:
+    """The bench's signs in order: (design, kind, truth label, diameter px, (h, w) uint8
+    crop) for ``per_value`` crops of each kind of each of ``designs`` (the end of all
+    restrictions 15 times as many), diameters drawn from ``min_px`` to ``max_px``."""
+    for design in designs:
+        cases = bench_cases(design)
+        repeats = per_value * (15 if len(cases) == 1 else 1)
+        for kind, sign_design in cases:
+            truth = design_label(kind)
+            for _ in range(repeats):
+                diameter = int(rng.integers(min_px, max_px + 1))
+                yield design, kind, truth, diameter, design_crop(kind, sign_design, diameter,
+                                                                 rng)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--per-value', type=int, default=8,
@@ -90,23 +107,21 @@ def main(argv: list[str] | None = None) -> int:
     rng = np.random.default_rng(args.seed)
     report: dict[str, dict] = {}
     start = time.perf_counter()
+    signs = design_signs(designs, args.per_value, args.min_px, args.max_px, rng)
     for design in designs:
         counts: Counter[str] = Counter()
         per_value: dict[str, Counter[str]] = defaultdict(Counter)
         wrong_answers: Counter[str] = Counter()
         cases = bench_cases(design)
         repeats = args.per_value * (15 if len(cases) == 1 else 1)
-        for kind, sign_design in cases:
-            truth = design_label(kind)
-            for _ in range(repeats):
-                diameter = int(rng.integers(args.min_px, args.max_px + 1))
-                answer = classifier.classify_crop(
-                    design_crop(kind, sign_design, diameter, rng)).label
-                result = outcome(truth, answer)
-                counts[result] += 1
-                per_value[kind][result] += 1
-                if result == 'wrong':
-                    wrong_answers[f'{kind} as {answer} ({diameter} px)'] += 1
+        for _ in range(repeats * len(cases)):
+            _, kind, truth, diameter, crop = next(signs)
+            answer = classifier.classify_crop(crop).label
+            result = outcome(truth, answer)
+            counts[result] += 1
+            per_value[kind][result] += 1
+            if result == 'wrong':
+                wrong_answers[f'{kind} as {answer} ({diameter} px)'] += 1
         total = sum(counts.values())
         report[design] = {
             'signs': total, 'right': counts['right'], 'wrong': counts['wrong'],

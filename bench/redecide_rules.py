@@ -6,10 +6,13 @@ decide them again with the rules as the code has them now.
 ``make validate-folds`` does) or of leave one value out (as ``make
 validate-value-holdout``, without scenes), and records every look at every crop each bank measures
 (:mod:`speed_sign_detector.training.recorded_looks`) into one pickle file (about 50 MB for
-the folds, 85 MB for leave one value out; 12-20 min each on 2 cores). ``replay`` decides
+the folds, 85 MB for leave one value out; 12-20 min each on 2 cores); ``record designs``
+renders the signs of ``make validate-designs`` (``bench/bench_sign_designs.py``, 30 of
+each value and design, seed 1) and records the shipped bank's looks at them (3 min). ``replay`` decides
 the recorded looks again and prints the figures of the run: the folds' accuracy, crops
 read as another limit per class and look-alikes read as a limit; per held-out value its
-crops read right and as another limit. ``--set NAME=VALUE`` changes a constant of
+crops read right and as another limit; per rendered design its signs read right and
+wrong (a limit not theirs). ``--set NAME=VALUE`` changes a constant of
 ``recognition/second_opinion.py`` (``UNSEEN_RUNNER_UP_PSR=1.0``) or a classifier
 parameter (``classifier.min_margin=2``) for that replay. With the rules unchanged the
 replay gives the recorded answers (it checks this and says so).
@@ -25,6 +28,7 @@ Usage::
         --scenes ../shared/data/gtsdb-dev
     python bench/redecide_rules.py record values out/looks_values.pkl \\
         ../shared/data/gtsrb-dev ../shared/data/gtsrb-lookalikes-dev
+    python bench/redecide_rules.py record designs out/looks_designs.pkl
     python bench/redecide_rules.py replay out/looks_folds.pkl out/looks_values.pkl \\
         [--set UNSEEN_RUNNER_UP_PSR=1.0] [--json]
 """
@@ -43,6 +47,7 @@ from speed_sign_detector.blas_threads import use_one_blas_thread
 use_one_blas_thread()  # reproducible training, as make bank
 
 import numpy as np  # noqa: E402
+from bench_sign_designs import BENCH_DESIGNS, design_signs  # noqa: E402 (bench/, beside)
 
 from speed_sign_detector.config import ClassifierConfig, DetectorConfig  # noqa: E402
 from speed_sign_detector.errors import TrainingDataError  # noqa: E402
@@ -63,6 +68,8 @@ from speed_sign_detector.training.track_validation import summarise  # noqa: E40
 from speed_sign_detector.training.value_holdout import value_answers  # noqa: E402
 
 FOLDS = 5
+#: What ``record`` records.
+MODES = ('folds', 'values', 'designs')
 
 
 def record(mode: str, out: Path, folders: list[Path], scenes: list[Path],
@@ -109,6 +116,23 @@ def record(mode: str, out: Path, folders: list[Path], scenes: list[Path],
         print(f'{name}: {len(rows)} crops recorded in {out}', file=sys.stderr)
 
 
+def record_designs(out: Path, per_value: int = 30, seed: int = 1,
+                   classifier_config: ClassifierConfig = ClassifierConfig()) -> None:
+    """Record the shipped bank's looks at the rendered signs of ``make validate-designs``
+    (``per_value`` of each value and design, ``seed``) into ``out``."""
+    classifier = Classifier(classifier_config)
+    rows = []
+    for design, kind, truth, diameter, crop in design_signs(
+            BENCH_DESIGNS, per_value, 15, 60, np.random.default_rng(seed)):
+        looks = record_looks(classifier, crop)
+        rows.append({'label': truth, 'design': design, 'kind': kind, 'width': diameter,
+                     'looks': looks,
+                     'answer': classifier.decide_crop(crop, looks.first).label})
+    _write_record(out, {'mode': 'designs',
+                        'runs': {'designs': {'bank': classifier.trained_bank, 'rows': rows}}})
+    print(f'designs: {len(rows)} signs recorded in {out}', file=sys.stderr)
+
+
 def _write_record(out: Path, recorded: dict[str, Any]) -> None:
     """Write ``recorded`` to ``out`` whole or not at all (through a file beside it)."""
     partial = out.with_name(out.name + '.partial')
@@ -131,7 +155,7 @@ def _read_record(path: Path) -> dict[str, Any]:
             ValueError) as err:
         raise RecordError(f'{path}: not readable as a record ({type(err).__name__}: '
                           f'{err})') from err
-    if not (isinstance(recorded, dict) and recorded.get('mode') in ('folds', 'values')
+    if not (isinstance(recorded, dict) and recorded.get('mode') in MODES
             and isinstance(recorded.get('runs'), dict)):
         raise RecordError(f'{path}: not a record of redecide_rules.py record')
     return recorded
@@ -148,6 +172,9 @@ def replay(path: Path, classifier_config: ClassifierConfig) -> dict[str, Any]:
         classifier = Classifier(classifier_config, run['bank'])
         answers = [redecide(classifier, row['looks']).label for row in run['rows']]
         changed += sum(answer != row['answer'] for answer, row in zip(answers, run['rows']))
+        if recorded['mode'] == 'designs':
+            figures['runs'] = design_figures(run['rows'], answers)
+            continue
         rows = [(row['label'], answer, row['class_id'], row['width'])
                 for row, answer in zip(run['rows'], answers)]
         if recorded['mode'] == 'folds':
@@ -168,8 +195,33 @@ def replay(path: Path, classifier_config: ClassifierConfig) -> dict[str, Any]:
     return figures
 
 
+def design_figures(rows: list[dict[str, Any]], answers: list[str]
+                   ) -> dict[str, dict[str, Any]]:
+    """Per design: signs, read right, wrong (a limit not the truth) and the wrong answers
+    (as ``bench_sign_designs.py`` reports them)."""
+    figures: dict[str, dict[str, Any]] = {}
+    for row, answer in zip(rows, answers):
+        design = figures.setdefault(row['design'], {'signs': 0, 'right': 0, 'wrong': 0,
+                                                     'wrong_answers': []})
+        design['signs'] += 1
+        if answer == row['label']:
+            design['right'] += 1
+        elif answer.isdigit():
+            design['wrong'] += 1
+            design['wrong_answers'].append(f'{row["kind"]} as {answer} ({row["width"]} px)')
+    return figures
+
+
 def print_figures(path: Path, figures: dict[str, Any]) -> None:
     print(f'{path} ({figures["answers_changed"]} answers differ from the recorded ones)')
+    if figures['mode'] == 'designs':
+        wrong = sum(design['wrong'] for design in figures['runs'].values())
+        print(f'  {wrong} wrong in all')
+        for name, design in figures['runs'].items():
+            print(f'  {name}: right {design["right"] / design["signs"]:.3f}, wrong '
+                  f'{design["wrong"]}' + (f' ({", ".join(design["wrong_answers"])})'
+                                          if design['wrong_answers'] else ''))
+        return
     if figures['mode'] == 'folds':
         worst = max(figures['wrong_limit_rate'].items(), key=lambda item: item[1])
         print(f'  accuracy {figures["accuracy_mean"]:.4f} (folds: '
@@ -204,11 +256,15 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     commands = parser.add_subparsers(dest='command', required=True)
     recording = commands.add_parser('record', help='train the banks and record the looks')
-    recording.add_argument('mode', choices=('folds', 'values'))
+    recording.add_argument('mode', choices=MODES)
     recording.add_argument('out', type=Path)
-    recording.add_argument('folders', type=Path, nargs='+')
+    recording.add_argument('folders', type=Path, nargs='*',
+                           help='the crop folders (folds and values modes)')
     recording.add_argument('--scenes', type=Path, action='append', default=[])
     recording.add_argument('--values', nargs='+', help='values to hold out (values mode)')
+    recording.add_argument('--seed', type=int, default=1,
+                           help='designs mode: the seed of the rendered signs (default 1, as '
+                                'make validate-designs)')
     replaying = commands.add_parser('replay', help='decide recorded looks again')
     replaying.add_argument('records', type=Path, nargs='+')
     replaying.add_argument('--set', action='append', default=[], metavar='NAME=VALUE')
@@ -217,6 +273,13 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == 'record':
         if args.mode == 'values' and args.scenes:
             parser.error('values mode trains without scenes, as make validate-value-holdout')
+        if args.mode == 'designs':
+            if args.folders or args.scenes or args.values:
+                parser.error('designs mode renders its signs: no folders, scenes or values')
+            record_designs(args.out, seed=args.seed)
+            return 0
+        if not args.folders:
+            parser.error(f'{args.mode} mode needs the crop folders')
         try:
             record(args.mode, args.out, args.folders, args.scenes, args.values)
         except TrainingDataError as err:

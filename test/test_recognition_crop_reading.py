@@ -14,10 +14,14 @@ from speed_sign_detector.config import ClassifierConfig, ConfigError
 from speed_sign_detector.config_parameters import from_parameters
 from speed_sign_detector.labelled_crops import LabelledCrop
 from speed_sign_detector.recognition.candidate_evidence import CorrelationEvidence
-from speed_sign_detector.recognition.classification import LABEL_NO_SIGN
+from speed_sign_detector.recognition.classification import LABEL_NO_SIGN, Classification
 from speed_sign_detector.recognition.classifier import Classifier
 from speed_sign_detector.recognition.crop_framing import auto_framings, crop_sign_radius
-from speed_sign_detector.recognition.crop_reading import crop_positions, framed_search_config
+from speed_sign_detector.recognition.crop_reading import (
+    crop_positions,
+    decide_crop,
+    framed_search_config,
+)
 from speed_sign_detector.recognition.second_opinion import SecondOpinion
 from speed_sign_detector.recognition.sign_designs import design_crop
 from speed_sign_detector.training.bank_training import locate_signs
@@ -217,3 +221,61 @@ def test_frames_answer_a_value_without_crops_only_on_a_clear_peak(
         assert strict.decide(crop, evidence, crop=True).label == value
         expected = LABEL_NO_SIGN if value == '130' else value
         assert strict.decide(crop, evidence).label == expected
+
+
+class _TwoLooks:
+    """A :class:`~.crop_reading.CropReader` whose first look and framed look answer as
+    given (their evidence is the answer itself)."""
+
+    def __init__(self, framed: Classification) -> None:
+        self.config = ClassifierConfig()
+        self.framed = framed
+        self.framed_looks = 0
+
+    @property
+    def crop_detection_gate(self) -> float:
+        return self.config.crop_detection_psr_threshold
+
+    def evidence_for_candidates(self, gray, positions, detection_psr_threshold=None,
+                                held_to_framing=False):
+        assert held_to_framing, 'only the framed look is asked for'
+        self.framed_looks += 1
+        return [self.framed]
+
+    def decide(self, gray, evidence, use_second_opinion=True, crop=False):
+        return evidence
+
+    def second_look_stands(self, answer: Classification) -> bool:
+        return answer.label != LABEL_NO_SIGN
+
+
+def _answer(label: str, psr: float) -> Classification:
+    return Classification(label, int(label) if label.isdigit() else None, psr, 20.0, 0.0,
+                          2.0, 30.0, 30.0)
+
+
+def test_a_limit_the_framed_look_reads_otherwise_is_withheld() -> None:
+    """A limit the first look reads is checked by the framed look: another limit read at
+    least as clearly there withholds the crop (a 130 whose free search read the inner
+    30); a weaker other limit, the same limit or no sign leaves the answer."""
+    crop = np.zeros((60, 60), np.uint8)
+    first = _answer('30', 15.5)
+    for framed, expected in ((_answer('130', 18.3), LABEL_NO_SIGN),
+                             (_answer('130', 15.5), LABEL_NO_SIGN),
+                             (_answer('130', 12.0), '30'),
+                             (_answer('30', 18.0), '30'),
+                             (_answer(LABEL_NO_SIGN, 0.0), '30'),
+                             (_answer('other_sign', 19.0), '30')):
+        reader = _TwoLooks(framed)
+        assert decide_crop(reader, crop, first, 'margin').label == expected, framed
+        assert reader.framed_looks == 1
+    # without the framed retry there is no framed look to check with
+    reader = _TwoLooks(_answer('130', 18.3))
+    reader.config = dataclasses.replace(reader.config, crop_framed_retry=False)
+    assert decide_crop(reader, crop, first, 'margin').label == '30'
+    assert reader.framed_looks == 0
+    # an answer that is no limit is not checked
+    reader = _TwoLooks(_answer('130', 18.3))
+    assert decide_crop(reader, crop, _answer('other_sign', 12.0), 'margin').label \
+        == 'other_sign'
+    assert reader.framed_looks == 0

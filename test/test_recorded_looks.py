@@ -160,3 +160,31 @@ def test_the_bench_says_why_it_cannot_record(tmp_path: Path, capsys) -> None:
     assert redecide_rules.main(['record', 'folds', str(out), str(empty_folder)]) == 1
     assert 'no_crops' in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_the_bench_records_and_replays_the_rendered_designs(tmp_path: Path, capsys) -> None:
+    """``record designs`` (one sign of each value and design): the shipped bank's answers
+    replayed, per design the signs of bench_sign_designs.py in its order."""
+    redecide_rules = bench_module('redecide_rules')
+    bench_designs = bench_module('bench_sign_designs')
+    path = tmp_path / 'designs.pkl'
+    redecide_rules.record_designs(path, per_value=1, seed=3)
+    with open(path, 'rb') as file:
+        recorded = pickle.load(file)
+    rows = recorded['runs']['designs']['rows']
+    expected = [(design, kind) for design in bench_designs.BENCH_DESIGNS
+                for kind, _ in bench_designs.bench_cases(design)
+                for _ in range(15 if len(bench_designs.bench_cases(design)) == 1 else 1)]
+    assert [(row['design'], row['kind']) for row in rows] == expected
+    assert redecide_rules.main(['replay', str(path), '--json']) == 0
+    results = eval_json(capsys.readouterr().out)[str(path)]
+    assert results['answers_changed'] == 0
+    figures = results['runs']
+    assert set(figures) == set(bench_designs.BENCH_DESIGNS)
+    assert sum(design['signs'] for design in figures.values()) == len(rows)
+    for design in figures.values():
+        assert design['right'] + design['wrong'] <= design['signs']
+        assert len(design['wrong_answers']) == design['wrong']
+    # the folders belong to the folds and values modes only
+    with pytest.raises(SystemExit):
+        redecide_rules.main(['record', 'designs', str(path), str(tmp_path)])

@@ -13,6 +13,7 @@ from speed_sign_detector.recognition.second_opinion import (
     COMPOSITE_ONLY_OVERRULE_LEAD,
     COMPOSITE_ONLY_RUNNER_UP_PSR,
     END_OF_LIMIT_LABEL,
+    LIT_ON_DARK_OVERRULE_LEAD,
     RENDERED_ONLY_MAX_GAP,
     RENDERED_ONLY_MAX_RANK,
     RENDERED_ONLY_MIN_SCORE,
@@ -217,14 +218,20 @@ def test_a_sign_read_inverted_keeps_an_unseen_leader_only_as_the_models_best() -
     found nearly as well; the model's own choice then stands on the usual rules."""
     opinion = _opinion(('40', '60', '80', 'no_sign', 'other_sign'),
                        ('60', '80', 'no_sign', 'other_sign'))
-    reads_sixty = np.asarray([-0.9, 0.9, -0.95, -0.95, -1.0])  # 40 at 1.8 below, 2nd
+    reads_sixty = np.asarray([-0.9, 0.8, -0.95, -0.95, -1.0])  # 40 at 1.7 below, 2nd
     ranked = ['40', '60', '80']
     correlation = [('40', 12.1), ('60', 11.5), ('80', 10.5)]
     assert opinion.choose(reads_sixty, ranked, 4, 0.6, 1.2, correlation) == '40'
+    assert LIT_ON_DARK_OVERRULE_LEAD > 1.75
     assert opinion.choose(reads_sixty, ranked, 4, 0.6, 1.2, correlation,
                           lit_on_dark=True) is None  # withheld, not turned into 60
     # there the model's own choice is judged as any other: an overrule of a leader known
-    # from renderings only needs COMPOSITE_ONLY_OVERRULE_LEAD
+    # from renderings only needs LIT_ON_DARK_OVERRULE_LEAD (the painted sign's
+    # COMPOSITE_ONLY_OVERRULE_LEAD is more: no real crop vouches for either design)
+    assert LIT_ON_DARK_OVERRULE_LEAD < 1.85 < COMPOSITE_ONLY_OVERRULE_LEAD
+    surer_sixty = np.asarray([-0.9, 0.9, -0.95, -0.95, -1.0])  # lead 1.85
+    assert opinion.choose(surer_sixty, ranked, 4, 0.6, 1.2, correlation,
+                          lit_on_dark=True) == '60'
     sure_sixty = np.asarray([-0.99, 0.99, -0.99, -0.99, -1.0])
     assert opinion.choose(sure_sixty, ranked, 4, 0.6, 1.2, correlation,
                           lit_on_dark=True) == '60'
@@ -235,3 +242,26 @@ def test_a_sign_read_inverted_keeps_an_unseen_leader_only_as_the_models_best() -
     real_leader = [('60', 12.1), ('80', 9.0)]
     assert opinion.choose(reads_sixty, ['60', '80'], 4, 0.6, 1.2, real_leader,
                           lit_on_dark=True) == '60'
+
+
+def test_a_sign_read_inverted_that_the_model_reads_as_the_leader_needs_no_real_crops() -> None:
+    """On a sign read inverted whose best label by the model is the correlation's leader,
+    a value known from composites only (110) needs no COMPOSITE_ONLY_ANSWER_LEAD, and a
+    value known from renderings only close behind it (140) does not withhold it: the
+    model learned that design of every value from renderings alike. On a painted sign
+    both guards stand."""
+    labels = ('40', '100', '110', '140', 'other_sign')
+    opinion = dataclasses.replace(
+        _opinion(labels, ('100', '110', 'other_sign')), crop_labels=('100', 'other_sign'))
+    reads_110 = np.asarray([-1.0, -0.8, 0.79, -0.8, -1.0])      # lead 1.59 over 100
+    assert reads_110[2] - reads_110[1] < COMPOSITE_ONLY_ANSWER_LEAD
+    ranked = ['110', '140', '100']
+    far = [('110', 14.0), ('140', 10.8), ('100', 9.4)]
+    assert opinion.choose(reads_110, ranked, 4, 0.6, 1.2, far) is None
+    assert opinion.choose(reads_110, ranked, 4, 0.6, 1.2, far, lit_on_dark=True) == '110'
+    close = [('110', 14.0), ('140', 14.0 - UNSEEN_RUNNER_UP_PSR + 0.2), ('100', 9.4)]
+    assert opinion.choose(reads_110, ranked, 4, 0.6, 1.2, close, lit_on_dark=True) == '110'
+    # where the model's best is not the leader, the runner-up guard stands inverted too
+    reads_100 = np.asarray([-1.0, 0.99, -0.99, -0.99, -1.0])
+    assert opinion.choose(reads_100, ['110', '140', '100'], 4, 0.6, 1.2, close,
+                          lit_on_dark=True) is None
