@@ -24,6 +24,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import sys
 import time
@@ -107,15 +108,14 @@ def main(argv: list[str] | None = None) -> int:
     rng = np.random.default_rng(args.seed)
     report: dict[str, dict] = {}
     start = time.perf_counter()
-    signs = design_signs(designs, args.per_value, args.min_px, args.max_px, rng)
-    for design in designs:
+    for design, signs in itertools.groupby(
+            design_signs(designs, args.per_value, args.min_px, args.max_px, rng),
+            key=lambda sign: sign[0]):
         counts: Counter[str] = Counter()
         per_value: dict[str, Counter[str]] = defaultdict(Counter)
         wrong_answers: Counter[str] = Counter()
         cases = bench_cases(design)
-        repeats = args.per_value * (15 if len(cases) == 1 else 1)
-        for _ in range(repeats * len(cases)):
-            _, kind, truth, diameter, crop = next(signs)
+        for _, kind, truth, diameter, crop in signs:
             answer = classifier.classify_crop(crop).label
             result = outcome(truth, answer)
             counts[result] += 1

@@ -27,7 +27,8 @@ least as clearly (its PSR), the crop is withheld. The free search sometimes sett
 the inner part of a sign or on a housing around it and reads the digits there (a 130 as
 30, a 10 as 100 on rendered dark-on-lit LED signs: 3 of the 14 wrong answers of ``make
 validate-designs``); the two looks disagreeing on the number is reason enough not to
-publish one. On gtsrb-dev: 1 crop of the 5 folds by track read right is withheld, 1 of
+publish one. It costs one more correlation per crop read as a limit (crops only: a
+frame's candidates get no framed look). On gtsrb-dev: 1 crop of the 5 folds by track read right is withheld, 1 of
 leave one value out read as another limit (a 120 as 100) is withheld and 1 read right
 too.
 
@@ -64,8 +65,8 @@ from speed_sign_detector.recognition.crop_framing import (
     padded_fallback_radius,
 )
 
-__all__ = ['CropReader', 'clearest', 'crop_positions', 'decide_crop', 'framed_search_config',
-           'padded_look_radius']
+__all__ = ['CropReader', 'clearest', 'crop_positions', 'decide_crop', 'framed_look',
+           'framed_search_config', 'padded_look_radius']
 
 
 class CropReader(Protocol):
@@ -131,6 +132,16 @@ def clearest(found: list[CorrelationEvidence | Classification]
                if isinstance(item, CorrelationEvidence) else -np.inf)
 
 
+def framed_look(classifier: CropReader, crop: np.ndarray, framing: str
+                ) -> CorrelationEvidence | Classification:
+    """The evidence of the framed look at a (h, w) uint8 ``crop`` framed as ``framing``:
+    the search held to the framing's centre and size (of each of its framings for
+    ``'auto'``, the clearest kept), with the crops' detection gate."""
+    return clearest(classifier.evidence_for_candidates(
+        crop, crop_positions(crop.shape, framing, classifier.config.min_sign_radius_px),
+        classifier.crop_detection_gate, held_to_framing=True))
+
+
 def decide_crop(classifier: CropReader, crop: np.ndarray,
                 evidence: CorrelationEvidence | Classification, framing: str,
                 use_second_opinion: bool = True) -> Classification:
@@ -145,19 +156,17 @@ def decide_crop(classifier: CropReader, crop: np.ndarray,
         use_second_opinion: ``False`` decides by the correlation filters alone.
     """
     answer = _read(classifier, crop, evidence, use_second_opinion)
-    height, width = crop.shape
-    gate = classifier.crop_detection_gate
-    min_radius_px = classifier.config.min_sign_radius_px
     if answer.label != LABEL_NO_SIGN:
         if answer.limit_kmh is not None and classifier.config.crop_framed_retry:
-            held = clearest(classifier.evidence_for_candidates(
-                crop, crop_positions(crop.shape, framing, min_radius_px), gate,
-                held_to_framing=True))
-            check = _read(classifier, crop, held, use_second_opinion)
+            check = _read(classifier, crop, framed_look(classifier, crop, framing),
+                          use_second_opinion)
             if check.limit_kmh is not None and check.label != answer.label \
                     and check.psr >= answer.psr:
                 return dataclasses.replace(answer, label=LABEL_NO_SIGN, limit_kmh=None)
         return answer
+    height, width = crop.shape
+    gate = classifier.crop_detection_gate
+    min_radius_px = classifier.config.min_sign_radius_px
     radius = padded_look_radius(crop.shape, framing, min_radius_px)
     if radius is not None:
         (padded,) = classifier.evidence_for_candidates(
@@ -166,10 +175,8 @@ def decide_crop(classifier: CropReader, crop: np.ndarray,
         if classifier.second_look_stands(second):
             return second
     if classifier.config.crop_framed_retry:
-        held = clearest(classifier.evidence_for_candidates(
-            crop, crop_positions(crop.shape, framing, min_radius_px), gate,
-            held_to_framing=True))
-        second = _read(classifier, crop, held, use_second_opinion)
+        second = _read(classifier, crop, framed_look(classifier, crop, framing),
+                       use_second_opinion)
         if classifier.second_look_stands(second):
             return second
     return answer

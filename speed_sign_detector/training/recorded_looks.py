@@ -25,9 +25,8 @@ from speed_sign_detector.recognition.candidate_evidence import CorrelationEviden
 from speed_sign_detector.recognition.classification import Classification
 from speed_sign_detector.recognition.classifier import Classifier
 from speed_sign_detector.recognition.crop_reading import (
-    clearest,
-    crop_positions,
     decide_crop,
+    framed_look,
     padded_look_radius,
 )
 from speed_sign_detector.recognition.sign_reading import SignReading
@@ -76,9 +75,8 @@ def record_looks(classifier: Classifier, crop: np.ndarray, first: Evidence | Non
     radius = padded_look_radius(crop.shape, config.crop_framing, config.min_sign_radius_px)
     padded = None if radius is None else classifier.evidence_for_candidates(
         crop, [(width / 2.0, height / 2.0, radius)], gate)[0]
-    held = clearest(classifier.evidence_for_candidates(
-        crop, crop_positions(crop.shape, config.crop_framing, config.min_sign_radius_px),
-        gate, held_to_framing=True)) if config.crop_framed_retry else None
+    held = framed_look(classifier, crop, config.crop_framing) if config.crop_framed_retry \
+        else None
     bank = classifier.trained_bank
     readings = tuple(
         classifier.sign_reading(crop, look)
