@@ -15,7 +15,12 @@ crops read right and as another limit; per rendered design its signs read right 
 wrong (a limit not theirs). ``--set NAME=VALUE`` changes a constant of
 ``recognition/second_opinion.py`` (``UNSEEN_RUNNER_UP_PSR=1.0``) or a classifier
 parameter (``classifier.min_margin=2``) for that replay. With the rules unchanged the
-replay gives the recorded answers (it checks this and says so).
+replay gives the recorded answers (it checks this and says so). ``costs`` decides each
+record again once per withholding rule with that rule turned off (:data:`RULES_OFF`) and
+counts what the rule costs and what it saves: crops it withholds that would be read right
+without it, and crops it keeps from being read as another limit (per record: the folds'
+limit crops and look-alikes; the held-out values' crops and the other values' crops of
+their folds; the rendered designs).
 
 The pickle holds the banks and numpy arrays: read only files you made. ``record`` writes
 it after each run (a run that fails keeps the runs before it); ``replay`` reports a file
@@ -31,14 +36,18 @@ Usage::
     python bench/redecide_rules.py record designs out/looks_designs.pkl
     python bench/redecide_rules.py replay out/looks_folds.pkl out/looks_values.pkl \\
         [--set UNSEEN_RUNNER_UP_PSR=1.0] [--json]
+    python bench/redecide_rules.py costs out/looks_folds.pkl out/looks_values.pkl [--json]
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
 import pickle
 import sys
+from collections import Counter
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -70,6 +79,21 @@ from speed_sign_detector.training.value_holdout import value_answers  # noqa: E4
 FOLDS = 5
 #: What ``record`` records.
 MODES = ('folds', 'values', 'designs')
+#: ``costs``: each rule that withholds an answer, and the ``--set`` that turns it off
+#: (the constants of ``recognition/second_opinion.py`` and the classifier's parameters).
+RULES_OFF: dict[str, str] = {
+    'runner-up without real pixels (UNSEEN_RUNNER_UP_PSR)': 'UNSEEN_RUNNER_UP_PSR=-inf',
+    'composite-only answer lead (COMPOSITE_ONLY_ANSWER_LEAD)': 'COMPOSITE_ONLY_ANSWER_LEAD=0',
+    'composite-only overrule lead (COMPOSITE_ONLY_OVERRULE_LEAD)':
+        'COMPOSITE_ONLY_OVERRULE_LEAD=0',
+    'lit-on-dark overrule lead (LIT_ON_DARK_OVERRULE_LEAD)': 'LIT_ON_DARK_OVERRULE_LEAD=0',
+    'three-digit composite runner-up (COMPOSITE_ONLY_RUNNER_UP_PSR)':
+        'COMPOSITE_ONLY_RUNNER_UP_PSR=-inf',
+    'candidate PSR gap (CANDIDATE_PSR_GAP)': 'CANDIDATE_PSR_GAP=inf',
+    'overrule lead (classifier.second_opinion_overrule_lead)':
+        'classifier.second_opinion_overrule_lead=0',
+    'filters\' margin (classifier.min_margin)': 'classifier.min_margin=0',
+}
 
 
 def record(mode: str, out: Path, folders: list[Path], scenes: list[Path],
@@ -168,9 +192,9 @@ def replay(path: Path, classifier_config: ClassifierConfig) -> dict[str, Any]:
     changed = 0
     figures: dict[str, Any] = {'mode': recorded['mode'], 'runs': {}}
     everything: list[tuple[str, str, int, int]] = []
+    decided = decide_again(recorded, classifier_config)
     for name, run in recorded['runs'].items():
-        classifier = Classifier(classifier_config, run['bank'])
-        answers = [redecide(classifier, row['looks']).label for row in run['rows']]
+        answers = decided[name]
         changed += sum(answer != row['answer'] for answer, row in zip(answers, run['rows']))
         if recorded['mode'] == 'designs':
             figures['runs'] = design_figures(run['rows'], answers)
@@ -193,6 +217,78 @@ def replay(path: Path, classifier_config: ClassifierConfig) -> dict[str, Any]:
             (summary['lookalikes_read_as_limit_rate'] or 0.0) * summary['lookalikes'])
     figures['answers_changed'] = changed
     return figures
+
+
+def decide_again(recorded: dict[str, Any], classifier_config: ClassifierConfig
+                 ) -> dict[str, list[str]]:
+    """Each run's answers (labels, in the order of its rows) decided again by the rules
+    as they are now and ``classifier_config``."""
+    decided = {}
+    for name, run in recorded['runs'].items():
+        classifier = Classifier(classifier_config, run['bank'])
+        decided[name] = [redecide(classifier, row['looks']).label for row in run['rows']]
+    return decided
+
+
+def _is_right(truth: str, answer: str) -> bool:
+    """A limit read as its value; an end of limit, a look-alike or clutter read as no limit."""
+    return answer == truth if truth.isdigit() else not answer.isdigit()
+
+
+def _is_another_limit(truth: str, answer: str) -> bool:
+    return answer.isdigit() and answer != truth
+
+
+def rule_costs(path: Path, rules: dict[str, str] | None = None) -> dict[str, Any]:
+    """What each rule of ``rules`` (name -> the ``--set`` that turns it off; default
+    :data:`RULES_OFF`) costs and saves on the record in ``path``: the record decided
+    with the rules as they are, then with each rule off in turn.
+
+    Returns:
+        ``{'mode', 'rules': {name: {group: {'right': n, 'another_limit': n}}}}``: per
+        group of rows, how many more would be read right and how many more read as
+        another limit with the rule off (negative: fewer). Groups: ``'limits and ends'``
+        and ``'look-alikes'`` (folds); ``'held-out value'`` and ``'other values'``
+        (values); each design (designs).
+    """
+    recorded = _read_record(path)
+    base = decide_again(recorded, ClassifierConfig())
+    mode = recorded['mode']
+    costs: dict[str, Any] = {}
+    for rule, setting in (RULES_OFF if rules is None else rules).items():
+        with settings_applied([setting]) as classifier_config:
+            answers = decide_again(recorded, classifier_config)
+        groups: dict[str, Counter[str]] = {}
+        for name, run in recorded['runs'].items():
+            for row, before, after in zip(run['rows'], base[name], answers[name]):
+                group = _cost_group(mode, name, row)
+                counts = groups.setdefault(group, Counter())
+                counts['right'] += _is_right(row['label'], after) - _is_right(row['label'],
+                                                                              before)
+                counts['another_limit'] += (_is_another_limit(row['label'], after)
+                                            - _is_another_limit(row['label'], before))
+        costs[rule] = {group: {'right': counts['right'],
+                               'another_limit': counts['another_limit']}
+                       for group, counts in sorted(groups.items())}
+    return {'mode': mode, 'rules': costs}
+
+
+def _cost_group(mode: str, run: str, row: dict[str, Any]) -> str:
+    if mode == 'designs':
+        return row['design']
+    if mode == 'values':
+        return 'held-out value' if row['label'] == run.split()[-1] else 'other values'
+    return 'limits and ends' if row['label'].isdigit() or row['label'] == 'end_of_limit' \
+        else 'look-alikes'
+
+
+def print_costs(path: Path, costs: dict[str, Any]) -> None:
+    print(f'{path}: with each rule off, crops read right / read as another limit, more (+) '
+          'or fewer (-)')
+    for rule, groups in costs['rules'].items():
+        changed = [f'{group} {counts["right"]:+d} / {counts["another_limit"]:+d}'
+                   for group, counts in groups.items() if any(counts.values())]
+        print(f'  {rule}: ' + ('; '.join(changed) if changed else 'no change'))
 
 
 def design_figures(rows: list[dict[str, Any]], answers: list[str]
@@ -234,6 +330,19 @@ def print_figures(path: Path, figures: dict[str, Any]) -> None:
               f'{100 * held["wrong_limit_rate"]:.2f} %')
 
 
+@contextlib.contextmanager
+def settings_applied(settings: list[str]) -> Iterator[ClassifierConfig]:
+    """:func:`apply_settings` for the ``with`` block, the constants of
+    ``second_opinion.py`` restored after it."""
+    saved = {name: value for name, value in vars(second_opinion).items()
+             if name.isupper() and isinstance(value, (int, float))}
+    try:
+        yield apply_settings(settings)
+    finally:
+        for name, value in saved.items():
+            setattr(second_opinion, name, value)
+
+
 def apply_settings(settings: list[str]) -> ClassifierConfig:
     """Apply ``--set`` values; returns the classifier config to decide with."""
     classifier_config = ClassifierConfig()
@@ -269,6 +378,9 @@ def main(argv: list[str] | None = None) -> int:
     replaying.add_argument('records', type=Path, nargs='+')
     replaying.add_argument('--set', action='append', default=[], metavar='NAME=VALUE')
     replaying.add_argument('--json', action='store_true')
+    costing = commands.add_parser('costs', help='what each withholding rule costs and saves')
+    costing.add_argument('records', type=Path, nargs='+')
+    costing.add_argument('--json', action='store_true')
     args = parser.parse_args(argv)
     if args.command == 'record':
         if args.mode == 'values' and args.scenes:
@@ -286,17 +398,23 @@ def main(argv: list[str] | None = None) -> int:
             print(f'redecide_rules.py record: {err}', file=sys.stderr)
             return 1
         return 0
-    classifier_config = apply_settings(args.set)
+    classifier_config = apply_settings(args.set) if args.command == 'replay' else None
     results: dict[str, Any] = {}
     failed = 0
     for path in args.records:
         try:
-            results[str(path)] = replay(path, classifier_config)
+            if classifier_config is None:
+                results[str(path)] = rule_costs(path)
+            else:
+                results[str(path)] = replay(path, classifier_config)
         except RecordError as err:
-            print(f'redecide_rules.py replay: {err}', file=sys.stderr)
+            print(f'redecide_rules.py {args.command}: {err}', file=sys.stderr)
             failed += 1
             continue
-        print_figures(path, results[str(path)])
+        if classifier_config is None:
+            print_costs(path, results[str(path)])
+        else:
+            print_figures(path, results[str(path)])
     if args.json:
         print(json.dumps(results))
     return 1 if failed else 0

@@ -66,18 +66,24 @@ def test_a_rule_changed_after_recording_decides_the_record(classifier: Classifie
     assert after == [classifier.classify_crop(crop).label for _, crop in crops]
 
 
-def test_the_bench_replays_a_record_and_applies_settings(classifier: Classifier, crops,
-                                                         tmp_path: Path, capsys) -> None:
-    redecide_rules = bench_module('redecide_rules')
+def _write_folds_record(classifier: Classifier, crops, path: Path) -> list[dict]:
+    """A record of one fold holding the looks at ``crops``; returns its rows."""
     rows = []
     for kind, crop in crops:
         looks = record_looks(classifier, crop)
         rows.append({'label': kind, 'class_id': 0, 'width': crop.shape[1], 'looks': looks,
                      'answer': classifier.decide_crop(crop, looks.first).label})
-    path = tmp_path / 'looks.pkl'
     with open(path, 'wb') as file:
         pickle.dump({'mode': 'folds', 'runs': {'fold 0': {'bank': classifier.trained_bank,
                                                          'rows': rows}}}, file)
+    return rows
+
+
+def test_the_bench_replays_a_record_and_applies_settings(classifier: Classifier, crops,
+                                                         tmp_path: Path, capsys) -> None:
+    redecide_rules = bench_module('redecide_rules')
+    path = tmp_path / 'looks.pkl'
+    rows = _write_folds_record(classifier, crops, path)
     assert redecide_rules.main(['replay', str(path), '--json']) == 0
     figures = eval_json(capsys.readouterr().out)[str(path)]
     assert figures['answers_changed'] == 0
@@ -92,6 +98,36 @@ def test_the_bench_replays_a_record_and_applies_settings(classifier: Classifier,
     assert strict['answers_changed'] == sum(row['answer'] != 'no_sign' for row in rows)
     with pytest.raises(SystemExit):
         redecide_rules.main(['replay', str(path), '--set', 'NO_SUCH_RULE=1'])
+
+
+def test_the_bench_counts_what_each_rule_costs_and_saves(classifier: Classifier, crops,
+                                                         tmp_path: Path, capsys) -> None:
+    redecide_rules = bench_module('redecide_rules')
+    path = tmp_path / 'looks.pkl'
+    rows = _write_folds_record(classifier, crops, path)
+    # a "rule" whose cost is known: with it on, every crop is withheld
+    costs = redecide_rules.rule_costs(path, {
+        'withhold all': 'classifier.second_opinion_psr_threshold=1000'})
+    limits = [row for row in rows if row['label'].isdigit()]
+    assert limits and len(limits) < len(rows)
+    right = sum(row['answer'] == row['label'] for row in limits)
+    wrong = sum(row['answer'].isdigit() and row['answer'] != row['label'] for row in limits)
+    clutter = [row for row in rows if not row['label'].isdigit()]
+    assert costs['rules']['withhold all'] == {
+        'limits and ends': {'right': -right, 'another_limit': -wrong},
+        'look-alikes': {'right': sum(row['answer'].isdigit() for row in clutter),
+                        'another_limit': -sum(row['answer'].isdigit() for row in clutter)}}
+    # every rule of RULES_OFF is measured, and the constants are as they were after it
+    before = second_opinion.UNSEEN_RUNNER_UP_PSR
+    assert redecide_rules.main(['costs', str(path), '--json']) == 0
+    output = capsys.readouterr().out
+    measured = eval_json(output)[str(path)]['rules']
+    assert set(measured) == set(redecide_rules.RULES_OFF)
+    assert second_opinion.UNSEEN_RUNNER_UP_PSR == before
+    assert all(set(groups) <= {'limits and ends', 'look-alikes'}
+               for groups in measured.values())
+    assert 'with each rule off' in output
+    assert redecide_rules.main(['costs', str(tmp_path / 'missing.pkl')]) == 1
 
 
 def eval_json(output: str) -> dict:
