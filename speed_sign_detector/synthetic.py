@@ -22,9 +22,9 @@ World and camera (metres, right-handed, y down):
   votes on reaches its least radius).
 - Look-alikes: end-of-limit signs and other round signs (no overtaking, no entry,
   weight/width/height limits, ...), half each.
-- Distractors: lamp globes (growing circles), a vehicle ahead with a spare wheel and
-  round tail lights (circles that hardly grow), stickers fixed on the windscreen
-  (circles that never move).
+- Distractors (:mod:`.synthetic_roadside`): lamp globes (growing circles), a vehicle
+  ahead with a spare wheel and round tail lights (circles that hardly grow), stickers
+  fixed on the windscreen (circles that never move).
 - Lighting: ``day``, ``dusk`` (darker, warm), ``night`` (dark, low contrast, headlight
   pool on the road, retro-reflecting signs, lit lamps) or ``mixed`` (day to night
   over the drive). Motion blur (forward motion and camera shake; exposure about 4 ms
@@ -35,6 +35,7 @@ Everything is a function of the seed and the frame index: the same
 """
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -42,6 +43,17 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from speed_sign_detector.synthetic_roadside import (
+    LeadVehicle,
+    RoadsideProp,
+    Sticker,
+    draw_lead_vehicle,
+    draw_props,
+    draw_stickers,
+    place_props,
+    plan_lead_vehicle,
+    plan_stickers,
+)
 from speed_sign_detector.synthetic_scenery import (
     FAR_AZIMUTH_RAD,
     FAR_SIZE,
@@ -51,14 +63,10 @@ from speed_sign_detector.synthetic_scenery import (
     GROUND_HALF_WIDTH_M,
     GROUND_PERIOD_M,
     GROUND_RESOLUTION_M,
-    ROAD_LEFT_M,
-    ROAD_RIGHT_M,
-    add_glow,
     apply_lighting,
     background_gain,
     composite,
     far_texture,
-    fill_ellipse,
     fill_rect,
     ground_texture,
     headlight_pool,
@@ -217,17 +225,6 @@ class _SignView:
     box: tuple[float, float, float, float] | None
 
 
-@dataclass(frozen=True)
-class _Prop:
-    """A roadside object: 'tree', 'lamp', 'mirror' or 'bush'."""
-
-    kind: str
-    x_m: float
-    z_m: float
-    size_m: float
-    shade: float
-
-
 def min_truth_radius_px(kind: str) -> float:
     """The least radius, pixels, at which the truth lists a sign of this kind:
     :data:`MIN_TRUTH_RADIUS_END_SIGN_PX` for an end sign (no red ring), else
@@ -269,9 +266,14 @@ class SyntheticDrive:
         self._phases = rng.uniform(0.0, 2.0 * math.pi, 8)
         self._speed_wobble = rng.uniform(0.03, 0.08)
         self.signs: tuple[SignPlacement, ...] = self._place_signs(rng)
-        self._props: tuple[_Prop, ...] = self._place_props(rng) if config.distractors else ()
-        self._lead_vehicle = (self._plan_lead_vehicle(rng) if config.distractors else None)
-        self._stickers = self._plan_stickers(rng) if config.distractors else ()
+        self._props: tuple[RoadsideProp, ...] = (
+            place_props(rng, config.speed_mps * config.duration_s) if config.distractors
+            else ())
+        self._lead_vehicle: LeadVehicle | None = (
+            plan_lead_vehicle(rng, config.duration_s) if config.distractors else None)
+        self._stickers: tuple[Sticker, ...] = (
+            plan_stickers(rng, config.width_px, config.height_px) if config.distractors
+            else ())
         self._ground = ground_texture(np.random.default_rng([config.seed, 2]))
         self._far = far_texture(np.random.default_rng([config.seed, 3]))
         width, height = config.width_px, config.height_px
@@ -324,9 +326,13 @@ class SyntheticDrive:
         rng = np.random.default_rng([config.seed, 4, index])
 
         image = self._background(pose)
-        self._draw_props(image, pose, night, emissive=False)
-        self._draw_lead_vehicle(image, time_s, pose, night, emissive=False)
-        self._draw_stickers(image)
+        project = functools.partial(self._project, pose)
+        scene = (pose.z_m, project, config.focal_px)
+        draw_props(image, self._props, *scene, config.width_px, config.camera_height_m, night,
+                   emissive=False)
+        draw_lead_vehicle(image, self._lead_vehicle, time_s, *scene, config.camera_height_m,
+                          night, emissive=False)
+        draw_stickers(image, self._stickers)
         image = apply_lighting(image, darkness, self._headlight)
         rows = []
         for sign in sorted(self.signs, key=lambda s: -(s.z_m - pose.z_m)):
@@ -337,8 +343,10 @@ class SyntheticDrive:
             if view.box is not None:
                 rows.append(TruthRow(config.stamp_ns(index) * 1e-9, index, sign.track_id,
                                      sign.kind, sign.limit_kmh, *view.box))
-        self._draw_props(image, pose, night, emissive=True)
-        self._draw_lead_vehicle(image, time_s, pose, night, emissive=True)
+        draw_props(image, self._props, *scene, config.width_px, config.camera_height_m, night,
+                   emissive=True)
+        draw_lead_vehicle(image, self._lead_vehicle, time_s, *scene, config.camera_height_m,
+                          night, emissive=True)
         image = _shake_blur(image, pose, config.focal_px, exposure_s)
         noise_sigma = 1.5 + 4.5 * darkness
         image += rng.standard_normal(image.shape, dtype=np.float32) * noise_sigma
@@ -385,45 +393,6 @@ class SyntheticDrive:
                 fading=float(rng.uniform(0.0, 0.3))))
             exit_time_s += rng.uniform(2.6, 4.2)
         return tuple(signs)
-
-    def _place_props(self, rng: np.random.Generator) -> tuple[_Prop, ...]:
-        config = self.config
-        road_end_m = config.speed_mps * config.duration_s + 200.0
-        props: list[_Prop] = []
-        z_m = 5.0
-        while z_m < road_end_m:
-            side = 1.0 if rng.uniform() < 0.5 else -1.0
-            x_m = (ROAD_RIGHT_M + rng.uniform(3.0, 12.0) if side > 0
-                   else ROAD_LEFT_M - rng.uniform(2.5, 12.0))
-            kind = 'tree' if rng.uniform() < 0.75 else 'bush'
-            props.append(_Prop(kind, float(x_m), float(z_m), float(rng.uniform(2.0, 5.0)),
-                               float(rng.uniform(0.6, 1.2))))
-            z_m += float(rng.uniform(4.0, 14.0))
-        z_m = float(rng.uniform(10.0, 40.0))
-        while z_m < road_end_m:
-            props.append(_Prop('lamp', ROAD_LEFT_M - 0.8 if rng.uniform() < 0.5
-                               else ROAD_RIGHT_M + 1.6, z_m, 0.22, 1.0))
-            z_m += float(rng.uniform(35.0, 60.0))
-        z_m = float(rng.uniform(40.0, 120.0))
-        while z_m < road_end_m:
-            props.append(_Prop('mirror', ROAD_LEFT_M - 1.0, z_m, 0.4, 1.0))
-            z_m += float(rng.uniform(120.0, 250.0))
-        return tuple(props)
-
-    def _plan_lead_vehicle(self, rng: np.random.Generator) -> tuple[float, float, float]:
-        """(start time s, end time s, shade) of the vehicle driving ahead in our lane."""
-        duration_s = self.config.duration_s
-        start_s = float(rng.uniform(0.0, 0.4)) * duration_s
-        return start_s, start_s + float(rng.uniform(0.3, 0.6)) * duration_s, float(
-            rng.uniform(0.5, 1.0))
-
-    def _plan_stickers(self, rng: np.random.Generator) -> tuple[tuple[int, int, int, int], ...]:
-        """Windscreen stickers: (x px, y px, radius px, style)."""
-        width, height = self.config.width_px, self.config.height_px
-        return ((int(width * rng.uniform(0.78, 0.92)), int(height * rng.uniform(0.05, 0.15)),
-                 int(rng.uniform(12, 18)), 0),
-                (int(width * rng.uniform(0.05, 0.2)), int(height * rng.uniform(0.85, 0.93)),
-                 int(rng.uniform(16, 24)), 1))
 
     # ------------------------------------------------------------------ camera
     def _pose(self, time_s: float) -> _Pose:
@@ -494,96 +463,6 @@ class SyntheticDrive:
         weight = np.exp(-(distance * horizontal) / FOG_DISTANCE_M) * below
         weight = weight[..., None].astype(np.float32)
         return ground * weight + far * (1.0 - weight)
-
-    def _draw_props(self, image: np.ndarray, pose: _Pose, night: float, emissive: bool) -> None:
-        height_m = self.config.camera_height_m
-        visible = [prop for prop in self._props if 1.0 < prop.z_m - pose.z_m < 150.0]
-        for prop in sorted(visible, key=lambda prop: -(prop.z_m - pose.z_m)):
-            base = self._project(pose, prop.x_m, height_m, prop.z_m)
-            if base is None:
-                continue
-            u_px, v_px, depth_m = base
-            scale = self.config.focal_px / depth_m
-            if u_px < -400 or u_px > self.config.width_px + 400:
-                continue
-            if prop.kind == 'tree' and not emissive:
-                trunk_w = max(1, int(0.25 * scale))
-                crown_r = prop.size_m * 0.45 * scale
-                top_v = v_px - prop.size_m * 1.3 * scale
-                fill_rect(image, u_px - trunk_w / 2, top_v, u_px + trunk_w / 2, v_px,
-                          (40 * prop.shade, 55 * prop.shade, 75 * prop.shade))
-                fill_ellipse(image, u_px, top_v - 0.2 * crown_r, crown_r, 1.2 * crown_r,
-                             (45 * prop.shade, 100 * prop.shade, 60 * prop.shade))
-                fill_ellipse(image, u_px - 0.3 * crown_r, top_v - 0.5 * crown_r,
-                             0.5 * crown_r, 0.6 * crown_r,
-                             (60 * prop.shade, 125 * prop.shade, 80 * prop.shade))
-            elif prop.kind == 'bush' and not emissive:
-                radius = prop.size_m * 0.3 * scale
-                fill_ellipse(image, u_px, v_px - 0.6 * radius, 1.4 * radius, 0.8 * radius,
-                             (40 * prop.shade, 90 * prop.shade, 55 * prop.shade))
-            elif prop.kind == 'lamp':
-                top_v = v_px - 5.0 * scale
-                globe_r = prop.size_m * scale
-                if not emissive:
-                    fill_rect(image, u_px - 0.06 * scale, top_v, u_px + 0.06 * scale, v_px,
-                              (105, 105, 110))
-                    fill_ellipse(image, u_px, top_v - globe_r, globe_r, globe_r,
-                                 (215, 220, 220))
-                elif night > 0.0:
-                    add_glow(image, u_px, top_v - globe_r, globe_r, 200.0 * night)
-            elif prop.kind == 'mirror' and not emissive:
-                top_v = v_px - 2.4 * scale
-                radius = prop.size_m * scale
-                fill_rect(image, u_px - 0.05 * scale, top_v, u_px + 0.05 * scale, v_px,
-                          (110, 110, 110))
-                fill_ellipse(image, u_px, top_v, radius, radius, (20, 90, 230))
-                fill_ellipse(image, u_px, top_v, 0.8 * radius, 0.8 * radius, (150, 140, 130))
-                fill_ellipse(image, u_px - 0.2 * radius, top_v - 0.2 * radius,
-                             0.4 * radius, 0.3 * radius, (200, 190, 180))
-
-    def _draw_lead_vehicle(self, image: np.ndarray, time_s: float, pose: _Pose, night: float,
-                           emissive: bool) -> None:
-        if self._lead_vehicle is None:
-            return
-        start_s, end_s, shade = self._lead_vehicle
-        if not start_s <= time_s <= end_s:
-            return
-        phase = (time_s - start_s) / max(end_s - start_s, 1e-6)
-        gap_m = 14.0 + 40.0 * (1.0 - math.sin(math.pi * phase)) ** 2
-        z_m = pose.z_m + gap_m
-        height_m = self.config.camera_height_m
-        base = self._project(pose, 0.0, height_m, z_m)
-        if base is None:
-            return
-        u_px, v_px, depth_m = base
-        scale = self.config.focal_px / depth_m
-        half_w, body_h = 0.95 * scale, 1.7 * scale
-        wheel_v = v_px - 0.85 * scale
-        light_r = 0.09 * scale
-        lights = ((u_px - 0.75 * scale, v_px - 1.0 * scale), (u_px + 0.75 * scale,
-                                                             v_px - 1.0 * scale))
-        if not emissive:
-            fill_rect(image, u_px - half_w, v_px - body_h, u_px + half_w, v_px - 0.25 * scale,
-                      (150 * shade, 150 * shade, 140 * shade))
-            fill_rect(image, u_px - half_w, v_px - 0.45 * scale, u_px + half_w, v_px,
-                      (30, 30, 30))
-            fill_ellipse(image, u_px, wheel_v, 0.36 * scale, 0.36 * scale, (25, 25, 25))
-            fill_ellipse(image, u_px, wheel_v, 0.2 * scale, 0.2 * scale, (170, 170, 175))
-            fill_ellipse(image, u_px, wheel_v, 0.05 * scale, 0.05 * scale, (60, 60, 60))
-            for light_u, light_v in lights:
-                fill_ellipse(image, light_u, light_v, light_r, light_r, (40, 40, 170))
-        elif night > 0.0:
-            for light_u, light_v in lights:
-                add_glow(image, light_u, light_v, light_r, 180.0 * night, colour=(0.3, 0.3, 1.0))
-
-    def _draw_stickers(self, image: np.ndarray) -> None:
-        for x_px, y_px, radius, style in self._stickers:
-            if style == 0:   # blue parking sticker with a white rim
-                fill_ellipse(image, x_px, y_px, radius, radius, (230, 230, 230))
-                fill_ellipse(image, x_px, y_px, 0.8 * radius, 0.8 * radius, (170, 90, 30))
-            else:            # round dashboard dial
-                fill_ellipse(image, x_px, y_px, radius, radius, (35, 35, 35))
-                fill_ellipse(image, x_px, y_px, 0.85 * radius, 0.85 * radius, (90, 90, 90))
 
     def _sign_view(self, sign: SignPlacement, pose: _Pose) -> _SignView | None:
         """Where the sign appears, or None when it is behind the camera or off-image."""
