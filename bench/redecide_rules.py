@@ -8,11 +8,15 @@ validate-value-holdout``, without scenes), and records every look at every crop 
 (:mod:`speed_sign_detector.training.recorded_looks`) into one pickle file (about 50 MB for
 the folds, 85 MB for leave one value out; 12-20 min each on 2 cores); ``record designs``
 renders the signs of ``make validate-designs`` (``bench/bench_sign_designs.py``, 30 of
-each value and design, seed 1) and records the shipped bank's looks at them (3 min). ``replay`` decides
+each value and design, seed 1) and records the shipped bank's looks at them (3 min);
+``record scenes`` trains the banks of the 5 folds by scene (every crop and the other
+folds' scenes, as the scene folds of ``make validate-folds``) and records each bank's
+looks at the detector's candidates of its own fold's frames. ``replay`` decides
 the recorded looks again and prints the figures of the run: the folds' accuracy, crops
 read as another limit per class and look-alikes read as a limit; per held-out value its
 crops read right and as another limit; per rendered design its signs read right and
-wrong (a limit not theirs). ``--set NAME=VALUE`` changes a constant of
+wrong (a limit not theirs); the scenes' limit signs recognized and false limits per
+frame. ``--set NAME=VALUE`` changes a constant of
 ``recognition/second_opinion.py`` (``UNSEEN_RUNNER_UP_PSR=1.0``) or a classifier
 parameter (``classifier.min_margin=2``) for that replay. With the rules unchanged the
 replay gives the recorded answers (it checks this and says so). ``costs`` decides each
@@ -20,7 +24,7 @@ record again once per withholding rule with that rule turned off (:data:`RULES_O
 counts what the rule costs and what it saves: crops it withholds that would be read right
 without it, and crops it keeps from being read as another limit (per record: the folds'
 limit crops and look-alikes; the held-out values' crops and the other values' crops of
-their folds; the rendered designs).
+their folds; the rendered designs; the scenes' limit signs recognized and false limits).
 
 The pickle holds the banks and numpy arrays: read only files you made. ``record`` writes
 it after each run (a run that fails keeps the runs before it); ``replay`` reports a file
@@ -34,6 +38,9 @@ Usage::
     python bench/redecide_rules.py record values out/looks_values.pkl \\
         ../shared/data/gtsrb-dev ../shared/data/gtsrb-lookalikes-dev
     python bench/redecide_rules.py record designs out/looks_designs.pkl
+    python bench/redecide_rules.py record scenes out/looks_scenes.pkl \\
+        ../shared/data/gtsrb-dev ../shared/data/gtsrb-lookalikes-dev \\
+        --scenes ../shared/data/gtsdb-dev
     python bench/redecide_rules.py replay out/looks_folds.pkl out/looks_values.pkl \\
         [--set UNSEEN_RUNNER_UP_PSR=1.0] [--json]
     python bench/redecide_rules.py costs out/looks_folds.pkl out/looks_values.pkl [--json]
@@ -72,13 +79,20 @@ from speed_sign_detector.training.bank_training import (  # noqa: E402
     scene_examples_of,
     train_from_located,
 )
-from speed_sign_detector.training.recorded_looks import record_looks, redecide  # noqa: E402
+from speed_sign_detector.scene_truth import count_false_limits, is_recognized  # noqa: E402
+from speed_sign_detector.training.recorded_looks import (  # noqa: E402
+    record_frame,
+    record_looks,
+    redecide,
+    redecide_frame,
+)
+from speed_sign_detector.training.scene_examples import read_scene_gray, scene_folds  # noqa: E402
 from speed_sign_detector.training.track_validation import summarise  # noqa: E402
 from speed_sign_detector.training.value_holdout import value_answers  # noqa: E402
 
 FOLDS = 5
 #: What ``record`` records.
-MODES = ('folds', 'values', 'designs')
+MODES = ('folds', 'values', 'designs', 'scenes')
 #: ``costs``: each rule that withholds an answer, and the ``--set`` that turns it off
 #: (the constants of ``recognition/second_opinion.py`` and the classifier's parameters).
 RULES_OFF: dict[str, str] = {
@@ -140,6 +154,57 @@ def record(mode: str, out: Path, folders: list[Path], scenes: list[Path],
         print(f'{name}: {len(rows)} crops recorded in {out}', file=sys.stderr)
 
 
+def record_scenes(out: Path, folders: list[Path], scenes: list[Path],
+                  config: TrainingConfig = TrainingConfig(),
+                  classifier_config: ClassifierConfig = ClassifierConfig(),
+                  folds: int = FOLDS) -> None:
+    """Train the banks of the ``folds`` folds by scene (every crop and the other folds'
+    scenes, as the scene folds of ``make validate-folds``) and record each bank's looks at
+    the detector's candidates of its own fold's frames (:func:`.record_frame`) into
+    ``out``."""
+    crops, images, unreadable = read_crops(folders)
+    for path in unreadable:
+        print(f'unreadable: {path}', file=sys.stderr)
+    rendered = rendered_classifier(classifier_config)
+    located = locate_signs(rendered, crops, images)
+    rendered_crops = locate_rendered(rendered, config)
+    detected, scene_examples = scene_examples_of(scenes, rendered, DetectorConfig(), config,
+                                                 'auto')
+    if scene_examples is None:
+        raise TrainingDataError('scenes mode trains the second opinion on the scenes')
+    try:
+        fold_of = scene_folds([scene.key for scene in detected], folds)
+    except ValueError as err:
+        raise TrainingDataError(f'cannot record the scene folds: {err}') from err
+    recorded: dict[str, Any] = {'mode': 'scenes', 'runs': {}}
+    for fold in range(folds):
+        kept = scene_examples.subset({key for key, scene_fold in fold_of.items()
+                                      if scene_fold != fold})
+        bank = train_from_located(located, config, rendered=rendered_crops, scenes=kept)
+        trained = Classifier(classifier_config, bank)
+        rows = []
+        for scene in detected:
+            gray = read_scene_gray(scene.path) if fold_of[scene.key] == fold else None
+            if gray is None:
+                continue
+            rows.append({'key': scene.key, 'signs': scene.signs,
+                         'candidates': scene.candidates,
+                         'looks': record_frame(trained, gray, scene.candidates),
+                         'answer': tuple(answer.label for answer in
+                                         trained.classify(gray, scene.candidates))})
+        recorded['runs'][f'scene fold {fold}'] = {'bank': bank, 'rows': rows}
+        _write_record(out, recorded)
+        print(f'scene fold {fold}: {len(rows)} frames recorded in {out}', file=sys.stderr)
+
+
+def _frame_counts(row: dict[str, Any], answers: Any) -> tuple[int, int, int]:
+    """(limit signs, recognized, false limits) of one recorded frame given its answers
+    (:class:`Classification` objects)."""
+    limits = [sign for sign in row['signs'] if sign.limit_kmh]
+    return (len(limits), sum(is_recognized(sign, row['candidates'], answers) for sign in limits),
+            count_false_limits(row['signs'], row['candidates'], answers))
+
+
 def record_designs(out: Path, per_value: int = 30, seed: int = 1,
                    classifier_config: ClassifierConfig = ClassifierConfig()) -> None:
     """Record the shipped bank's looks at the rendered signs of ``make validate-designs``
@@ -193,8 +258,18 @@ def replay(path: Path, classifier_config: ClassifierConfig) -> dict[str, Any]:
     figures: dict[str, Any] = {'mode': recorded['mode'], 'runs': {}}
     everything: list[tuple[str, str, int, int]] = []
     decided = decide_again(recorded, classifier_config)
+    totals = np.zeros(4, int)  # scenes: frames, limit signs, recognized, false limits
     for name, run in recorded['runs'].items():
         answers = decided[name]
+        if recorded['mode'] == 'scenes':
+            changed += sum(answer != label for frame, row in zip(answers, run['rows'])
+                           for answer, label in zip((a.label for a in frame), row['answer']))
+            counts = np.asarray([[1, *_frame_counts(row, frame)]
+                                 for row, frame in zip(run['rows'], answers)]).sum(axis=0)
+            totals += counts
+            figures['runs'][name] = {'recall': counts[2] / max(counts[1], 1),
+                                     'false_limits_per_frame': counts[3] / max(counts[0], 1)}
+            continue
         changed += sum(answer != row['answer'] for answer, row in zip(answers, run['rows']))
         if recorded['mode'] == 'designs':
             figures['runs'] = design_figures(run['rows'], answers)
@@ -215,18 +290,28 @@ def replay(path: Path, classifier_config: ClassifierConfig) -> dict[str, Any]:
                                        in summary['per_class'].items() if label.isdigit()}
         figures['lookalikes_read_as_limit'] = round(
             (summary['lookalikes_read_as_limit_rate'] or 0.0) * summary['lookalikes'])
+    if recorded['mode'] == 'scenes':
+        frames, signs, recognized, false_limits = (int(value) for value in totals)
+        figures.update({'frames': frames, 'signs': signs, 'recognized': recognized,
+                        'false_limits': false_limits,
+                        'recognition_recall': recognized / max(signs, 1),
+                        'false_limits_per_frame': false_limits / max(frames, 1)})
     figures['answers_changed'] = changed
     return figures
 
 
 def decide_again(recorded: dict[str, Any], classifier_config: ClassifierConfig
-                 ) -> dict[str, list[str]]:
-    """Each run's answers (labels, in the order of its rows) decided again by the rules
-    as they are now and ``classifier_config``."""
-    decided = {}
+                 ) -> dict[str, list[Any]]:
+    """Each run's answers (labels, in the order of its rows; for scenes, each frame's
+    :class:`Classification` tuple) decided again by the rules as they are now and
+    ``classifier_config``."""
+    decided: dict[str, list[Any]] = {}
     for name, run in recorded['runs'].items():
         classifier = Classifier(classifier_config, run['bank'])
-        decided[name] = [redecide(classifier, row['looks']).label for row in run['rows']]
+        if recorded['mode'] == 'scenes':  # each frame's answers, Classification objects
+            decided[name] = [redecide_frame(classifier, row['looks']) for row in run['rows']]
+        else:
+            decided[name] = [redecide(classifier, row['looks']).label for row in run['rows']]
     return decided
 
 
@@ -249,7 +334,8 @@ def rule_costs(path: Path, rules: dict[str, str] | None = None) -> dict[str, Any
         group of rows, how many more would be read right and how many more read as
         another limit with the rule off (negative: fewer). Groups: ``'limits and ends'``
         and ``'look-alikes'`` (folds); ``'held-out value'`` and ``'other values'``
-        (values); each design (designs).
+        (values); each design (designs); ``'limit signs'`` (scenes: ``right`` counts
+        the signs recognized, ``another_limit`` the false limits).
     """
     recorded = _read_record(path)
     base = decide_again(recorded, ClassifierConfig())
@@ -260,6 +346,14 @@ def rule_costs(path: Path, rules: dict[str, str] | None = None) -> dict[str, Any
             answers = decide_again(recorded, classifier_config)
         groups: dict[str, Counter[str]] = {}
         for name, run in recorded['runs'].items():
+            if mode == 'scenes':  # limit signs recognized, false limits
+                counts = groups.setdefault('limit signs', Counter())
+                for row, before, after in zip(run['rows'], base[name], answers[name]):
+                    _, right_before, false_before = _frame_counts(row, before)
+                    _, right_after, false_after = _frame_counts(row, after)
+                    counts['right'] += right_after - right_before
+                    counts['another_limit'] += false_after - false_before
+                continue
             for row, before, after in zip(run['rows'], base[name], answers[name]):
                 group = _cost_group(mode, name, row)
                 counts = groups.setdefault(group, Counter())
@@ -317,6 +411,12 @@ def print_figures(path: Path, figures: dict[str, Any]) -> None:
             print(f'  {name}: right {design["right"] / design["signs"]:.3f}, wrong '
                   f'{design["wrong"]}' + (f' ({", ".join(design["wrong_answers"])})'
                                           if design['wrong_answers'] else ''))
+        return
+    if figures['mode'] == 'scenes':
+        print(f'  limit signs recognized {figures["recognized"]} of {figures["signs"]} '
+              f'({figures["recognition_recall"]:.3f}), false limits {figures["false_limits"]} '
+              f'in {figures["frames"]} frames ({figures["false_limits_per_frame"]:.4f} per '
+              'frame)')
         return
     if figures['mode'] == 'folds':
         worst = max(figures['wrong_limit_rate'].items(), key=lambda item: item[1])
@@ -392,8 +492,13 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         if not args.folders:
             parser.error(f'{args.mode} mode needs the crop folders')
+        if args.mode == 'scenes' and not args.scenes:
+            parser.error('scenes mode needs --scenes')
         try:
-            record(args.mode, args.out, args.folders, args.scenes, args.values)
+            if args.mode == 'scenes':
+                record_scenes(args.out, args.folders, args.scenes)
+            else:
+                record(args.mode, args.out, args.folders, args.scenes, args.values)
         except TrainingDataError as err:
             print(f'redecide_rules.py record: {err}', file=sys.stderr)
             return 1

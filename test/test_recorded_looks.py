@@ -15,7 +15,13 @@ from speed_sign_detector.config import ClassifierConfig
 from speed_sign_detector.recognition import second_opinion
 from speed_sign_detector.recognition.classifier import Classifier
 from speed_sign_detector.recognition.sign_designs import design_crop
-from speed_sign_detector.training.recorded_looks import record_looks, redecide
+from speed_sign_detector.detection.candidates import Candidate
+from speed_sign_detector.training.recorded_looks import (
+    record_frame,
+    record_looks,
+    redecide,
+    redecide_frame,
+)
 from test_bench_smoke import bench_module
 
 
@@ -77,6 +83,31 @@ def _write_folds_record(classifier: Classifier, crops, path: Path) -> list[dict]
         pickle.dump({'mode': 'folds', 'runs': {'fold 0': {'bank': classifier.trained_bank,
                                                          'rows': rows}}}, file)
     return rows
+
+
+def test_recorded_frames_are_decided_as_the_frames_are(classifier: Classifier,
+                                                       monkeypatch) -> None:
+    bench_classifier = bench_module('bench_classifier')
+    frames = []
+    for seed in range(3):
+        gray, candidates = bench_classifier.synthetic_frame(seed)
+        # the inner ring's radius, as the detector reports on large signs: "no sign" at
+        # first, then read by the larger-size retry
+        halved = [Candidate(c.x_px, c.y_px, c.radius_px * 0.55, c.score)
+                  for c in candidates if c.radius_px >= 18]
+        frames.append((gray, list(candidates) + halved))
+    records = [record_frame(classifier, gray, candidates) for gray, candidates in frames]
+    answers = [classifier.classify(gray, candidates) for gray, candidates in frames]
+    assert [redecide_frame(classifier, looks) for looks in records] == answers
+    labels = [answer.label for frame in answers for answer in frame]
+    assert sum(label.isdigit() for label in labels) >= 6
+    assert any(look is not None for looks in records for look in looks.retry)
+    # a rule changed after recording decides as the frames are then read
+    monkeypatch.setattr(second_opinion, 'COMPOSITE_ONLY_ANSWER_LEAD', 3.0)
+    monkeypatch.setattr(second_opinion, 'UNSEEN_RUNNER_UP_PSR', 50.0)
+    strict = [classifier.classify(gray, candidates) for gray, candidates in frames]
+    assert strict != answers
+    assert [redecide_frame(classifier, looks) for looks in records] == strict
 
 
 def test_the_bench_replays_a_record_and_applies_settings(classifier: Classifier, crops,
@@ -157,6 +188,49 @@ def test_the_bench_records_the_runs_it_replays(tmp_path: Path, capsys) -> None:
     assert results[str(values)]['answers_changed'] == 0
     held = results[str(values)]['runs']['value 30']
     assert held['crops'] == 10 and held['right'] + held['wrong_limit'] + held['withheld'] == 10
+
+
+def test_the_bench_records_the_scene_folds_it_replays(tmp_path: Path, capsys) -> None:
+    """``record scenes`` on generated crops and scenes (a tiny recipe, 2 folds): replayed,
+    the figures of the scene folds' validation with the same banks."""
+    from scene_helpers import write_gtsdb_scenes
+    from test_recognition_scene_training import HEIGHT, SCENES, WIDTH
+    from test_recognition_training import SMALL, write_crop_folder
+    from test_training_value_holdout import TINY
+
+    from speed_sign_detector.config import DetectorConfig
+    from speed_sign_detector.training.bank_training import (
+        locate_rendered,
+        locate_signs,
+        read_crops,
+        rendered_classifier,
+        scene_examples_of,
+        train_from_located,
+    )
+    from speed_sign_detector.training.scene_validation import cross_validate_scenes
+    redecide_rules = bench_module('redecide_rules')
+    crops = write_crop_folder(tmp_path / 'crops', tracks_per_class=2, per_track=2)
+    scenes = write_gtsdb_scenes(tmp_path / 'scenes', SCENES, WIDTH, HEIGHT)
+    path = tmp_path / 'scenes.pkl'
+    redecide_rules.record_scenes(path, [crops], [scenes], TINY, SMALL, folds=2)
+    assert redecide_rules.main(['replay', str(path), '--json']) == 0
+    replayed = eval_json(capsys.readouterr().out)[str(path)]
+    assert replayed['answers_changed'] == 0
+    # the same banks (the recipe is seeded) in the scene folds' validation itself
+    rendered = rendered_classifier(SMALL)
+    located = locate_signs(rendered, *read_crops([crops])[:2])
+    rendered_crops = locate_rendered(rendered, TINY)
+    detected, examples = scene_examples_of([scenes], rendered, DetectorConfig(), TINY, 'auto')
+    report = cross_validate_scenes(detected, examples, 2, lambda kept: train_from_located(
+        located, TINY, rendered=rendered_crops, scenes=kept), SMALL)
+    assert report['signs'] == replayed['signs'] == 5 and report['frames'] == 4
+    for key in ('recognized', 'false_limits', 'frames'):
+        assert replayed[key] == report[key], key
+    assert replayed['recognized'] > 0
+    costs = redecide_rules.rule_costs(path, {
+        'withhold all': 'classifier.second_opinion_psr_threshold=1000'})
+    assert costs['rules']['withhold all'] == {'limit signs': {
+        'right': -report['recognized'], 'another_limit': -report['false_limits']}}
 
 
 def test_the_bench_reports_unreadable_records_and_replays_the_rest(

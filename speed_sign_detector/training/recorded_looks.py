@@ -10,6 +10,9 @@ it or not; :func:`redecide` gives the answer :meth:`Classifier.decide_crop` woul
 the rules as they are when it is called (the same code decides: only the correlations and
 readings come from the record). Bank validation (``bench/redecide_rules.py``) records
 the crops of its runs once and tries rule changes on them in seconds instead of hours.
+:func:`record_frame` and :func:`redecide_frame` do the same for the candidates of a frame
+(:meth:`Classifier.classify`: each candidate's look and the larger-size retry's), for the
+scene folds.
 
 Training-side only: the node never imports this module.
 """
@@ -21,17 +24,19 @@ from dataclasses import dataclass
 import numpy as np
 
 from speed_sign_detector.config import ClassifierConfig
+from speed_sign_detector.detection.candidates import Candidate
 from speed_sign_detector.recognition.candidate_evidence import CorrelationEvidence
-from speed_sign_detector.recognition.classification import Classification
+from speed_sign_detector.recognition.classification import LABEL_NO_SIGN, Classification
 from speed_sign_detector.recognition.classifier import Classifier
 from speed_sign_detector.recognition.crop_reading import (
     decide_crop,
     framed_look,
     padded_look_radius,
 )
-from speed_sign_detector.recognition.sign_reading import SignReading
+from speed_sign_detector.recognition.sign_reading import SignReading, read_signs
 
-__all__ = ['RecordedLooks', 'record_looks', 'redecide']
+__all__ = ['RecordedFrame', 'RecordedLooks', 'record_frame', 'record_looks', 'redecide',
+           'redecide_frame']
 
 Evidence = CorrelationEvidence | Classification
 
@@ -94,6 +99,104 @@ def redecide(classifier: Classifier, looks: RecordedLooks, use_second_opinion: b
     reader = _RecordedReader(classifier, looks)
     return decide_crop(reader, np.zeros(looks.shape, np.uint8), looks.first, looks.framing,
                        use_second_opinion)
+
+
+@dataclass(frozen=True)
+class RecordedFrame:
+    """The looks :meth:`Classifier.classify` may take at the candidates of one frame.
+
+    Attributes:
+        shape: (h, w) of the frame, pixels.
+        radii: (N,) the candidates' radii, pixels (the larger-size retry takes the largest).
+        first: each candidate's evidence at its radius.
+        first_readings: the trained bank's reading of each, ``None`` where no sign was found
+            there or the bank has no second opinion.
+        retry: each candidate's evidence at the larger-size retry's radius, ``None`` for a
+            candidate the config does not retry (taken for every candidate that may be
+            retried, whatever its first answer: the rules decide which are).
+        retry_readings: the bank's reading of each retry look, as ``first_readings``.
+    """
+
+    shape: tuple[int, int]
+    radii: tuple[float, ...]
+    first: tuple[Evidence, ...]
+    first_readings: tuple[SignReading | None, ...]
+    retry: tuple[Evidence | None, ...]
+    retry_readings: tuple[SignReading | None, ...]
+
+
+def record_frame(classifier: Classifier, gray: np.ndarray, candidates: Sequence[Candidate]
+                 ) -> RecordedFrame:
+    """Record every look :meth:`Classifier.classify` may take at ``candidates`` of the
+    (H, W) uint8 frame ``gray``."""
+    config = classifier.config
+    first = classifier.evidence_for_candidates(gray, classifier.candidate_positions(candidates))
+    retried = [index for index, candidate in enumerate(candidates)
+               if classifier.may_retry_larger(candidate)]
+    retry: list[Evidence | None] = [None] * len(candidates)
+    if retried:
+        second = classifier.evidence_for_candidates(
+            gray, classifier.candidate_positions([candidates[i] for i in retried], retry=True),
+            max(config.detection_psr_threshold, config.larger_size_retry_min_detection_psr))
+        for index, evidence in zip(retried, second, strict=True):
+            retry[index] = evidence
+    return RecordedFrame(gray.shape[:2], tuple(float(c.radius_px) for c in candidates),
+                         tuple(first), _readings(classifier, gray, first), tuple(retry),
+                         _readings(classifier, gray, retry))
+
+
+def _readings(classifier: Classifier, gray: np.ndarray, looks: Sequence[Evidence | None]
+              ) -> tuple[SignReading | None, ...]:
+    """The bank's reading of each located sign, read in the batches
+    :meth:`Classifier.classify` reads them in (the same floats): the signs the filters do
+    not withhold, upright and inverted apart; the others one by one."""
+    bank = classifier.trained_bank
+    if bank.second_opinion is None:
+        return (None,) * len(looks)
+    readings: list[SignReading | None] = [None] * len(looks)
+    located = [index for index, look in enumerate(looks)
+               if isinstance(look, CorrelationEvidence)]
+    asked = [index for index in located if not classifier._withheld_by_filters(
+        gray.shape, looks[index], bank.second_opinion)]
+    for inverted in (False, True):
+        group = [index for index in asked if looks[index].inverted == inverted]
+        if group:
+            for index, reading in zip(group, read_signs(
+                    bank, 255 - gray if inverted else gray, [looks[i] for i in group])):
+                readings[index] = reading
+    for index in located:
+        if index not in asked:
+            readings[index] = classifier.sign_reading(gray, looks[index])
+    return tuple(readings)
+
+
+def redecide_frame(classifier: Classifier, looks: RecordedFrame) -> tuple[Classification, ...]:
+    """The answers :meth:`Classifier.classify` gives for the recorded frame's candidates,
+    decided by ``classifier``'s current rules and config (which must hold the bank the
+    looks were recorded with, and the retry's radius and detection gate they were recorded
+    with)."""
+    shape_only = np.broadcast_to(np.uint8(0), looks.shape)  # the rules read its shape
+    answers = [_decided(classifier, shape_only, look, reading)
+               for look, reading in zip(looks.first, looks.first_readings, strict=True)]
+    retried = [index for index, answer in enumerate(answers)
+               if answer.label == LABEL_NO_SIGN and looks.retry[index] is not None]
+    retried = sorted(retried, key=lambda i: -looks.radii[i])[
+        :classifier.config.larger_size_retry_max_candidates]
+    for index in retried:
+        answer = _decided(classifier, shape_only, looks.retry[index],
+                          looks.retry_readings[index])
+        if classifier.second_look_stands(answer):
+            answers[index] = answer
+    return tuple(answers)
+
+
+def _decided(classifier: Classifier, shape_only: np.ndarray, look: Evidence | None,
+             reading: SignReading | None) -> Classification:
+    if isinstance(look, Classification):
+        return look
+    if reading is None and classifier.trained_bank.second_opinion is not None:
+        raise ValueError('the record holds no bank reading of this look')
+    return classifier._decide(shape_only, look, reading=reading)
 
 
 class _RecordedReader:
