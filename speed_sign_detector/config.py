@@ -252,6 +252,13 @@ class ClassifierConfig:
         'signs read as 5 or 40 (gtsdb-dev, 5 folds by scene: 5 of the 9 false limits in 466 '
         'frames, every one under PSR 9.5, went; no limit sign fewer recognized).',
         low=0.0, high=1000.0)
+    frame_overrule_min_psr: float = setting(
+        8.0, 'Frames (not crops): the least correlation PSR for the second opinion to answer '
+        "a limit other than the correlation's leading label; on weaker peaks that answer is "
+        'withheld (gtsdb-dev, 5 folds by scene, re-decided on recorded looks: 3 of the 5 '
+        'false limits in 466 frames went, each a limit the model read in clutter or in '
+        'another round sign under a leader of PSR 6.3-7.8; no limit sign fewer '
+        'recognized).', low=0.0, high=1000.0)
     max_cut_fraction: float = setting(0.2, 'A sign whose disc reaches beyond the frame '
                                       'border by more than this fraction of its radius is '
                                       'answered "no sign": its digits are cut off.',

@@ -24,6 +24,7 @@ from speed_sign_detector.recognition.crop_reading import (
 )
 from speed_sign_detector.recognition.second_opinion import SecondOpinion
 from speed_sign_detector.recognition.sign_designs import design_crop
+from speed_sign_detector.recognition.sign_reading import SignReading
 from speed_sign_detector.training.bank_training import locate_signs
 
 #: gtsrb-dev crops (class folder 00003 = 60 km/h, 00007 = 100 km/h) where the free search
@@ -221,6 +222,36 @@ def test_frames_answer_a_value_without_crops_only_on_a_clear_peak(
         assert strict.decide(crop, evidence, crop=True).label == value
         expected = LABEL_NO_SIGN if value == '130' else value
         assert strict.decide(crop, evidence).label == expected
+
+
+def test_frames_overrule_the_correlation_only_on_a_clear_peak(
+        classifier: Classifier, config: ClassifierConfig, monkeypatch) -> None:
+    """In a frame, the second opinion answers a limit other than the correlation's leader
+    only where the leader's PSR is at least ``frame_overrule_min_psr`` (a weak peak is
+    often clutter it reads a limit in); it may still agree with a weak leader, and a crop
+    (which frames a sign) is overruled on any peak."""
+    opinion = classifier.trained_bank.second_opinion
+    assert opinion is not None and config.frame_overrule_min_psr == 8.0
+    scores = np.full(len(opinion.labels), -1.0, np.float32)
+    scores[opinion.labels.index('30')] = 1.0  # the model is sure: a 30
+    monkeypatch.setattr(classifier, 'sign_reading',
+                        lambda gray, evidence: SignReading(scores, None))
+    gray = np.full((100, 100), 128, np.uint8)
+
+    def evidence(leader: str, psr: float) -> CorrelationEvidence:
+        runner_up = '30' if leader != '30' else '70'
+        return CorrelationEvidence(((leader, psr), (runner_up, psr - 0.2), ('20', psr - 2.0),
+                                    ('50', psr - 2.5)), 50.0, 50.0, 20.0, 0.0, 9.0)
+
+    weak = evidence('70', 7.0)
+    assert classifier.decide(gray, weak).label == LABEL_NO_SIGN
+    assert classifier.decide(gray, weak, crop=True).label == '30'
+    assert classifier.decide(gray, evidence('70', 8.5)).label == '30'
+    assert classifier.decide(gray, evidence('30', 7.0)).label == '30'
+    lenient = Classifier(dataclasses.replace(config, frame_overrule_min_psr=0.0),
+                         classifier.trained_bank)
+    monkeypatch.setattr(lenient, 'sign_reading', lambda gray, evidence: SignReading(scores, None))
+    assert lenient.decide(gray, weak).label == '30'
 
 
 class _TwoLooks:

@@ -442,6 +442,9 @@ class Classifier:
                     and choice not in opinion.labels_with_crops
                     and top_psr < config.frame_value_without_crops_min_psr):
                 choice = None  # in a frame, clutter reads as 5 or 40 on weak peaks
+            if (choice is not None and not crop and choice.isdigit() and choice != label
+                    and top_psr < config.frame_overrule_min_psr):
+                choice = None  # in a frame, a weak peak is clutter the model reads a limit in
             withhold = choice is None
             label = choice if choice is not None else label
         psr = next(p for (_, p), name in zip(evidence.ranked, labels) if name == label)
