@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 import rclpy
 from rcl_interfaces.msg import Log
-from rclpy.qos import ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from ros_spin import module_domain, ros_domain_environment, spinning
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
@@ -133,9 +133,13 @@ def test_qos_override_and_clean_stop_on_ctrl_c(probe: Probe, bank_cache: Path) -
     publisher: the node says the QoS is incompatible; Ctrl-C stops it cleanly."""
     probe.limits.clear()
     node_warnings: list[str] = []
+    # /rosout publishers are transient-local: a subscriber of the same durability also
+    # gets a warning logged before the two matched (the event may fire first under load)
     rosout = probe.create_subscription(
         Log, '/rosout', lambda msg: node_warnings.append(msg.msg)
-        if msg.name == 'speed_sign_detector' and msg.level >= Log.WARN else None, 100)
+        if msg.name == 'speed_sign_detector' and msg.level >= Log.WARN else None,
+        QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+                   durability=DurabilityPolicy.TRANSIENT_LOCAL))
     process = start_node(
         bank_cache, '-p', f'qos_overrides.{CAMERA_TOPIC}.subscription.reliability:=reliable')
 
