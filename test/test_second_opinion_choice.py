@@ -265,3 +265,24 @@ def test_a_sign_read_inverted_that_the_model_reads_as_the_leader_needs_no_real_c
     reads_100 = np.asarray([-1.0, 0.99, -0.99, -0.99, -1.0])
     assert opinion.choose(reads_100, ['110', '140', '100'], 4, 0.6, 1.2, close,
                           lit_on_dark=True) is None
+
+
+def test_on_a_lit_face_a_rendered_only_leader_stands_only_as_the_models_best() -> None:
+    """A sign read painted whose face glows in dark surroundings (``lit_face``: a
+    dark-on-lit electronic sign) gets the rendered-only leader's rule of a sign read
+    inverted, and only that: the 40 the model ranks second within the gap is withheld,
+    the 40 it reads stands, and the model's 60 is then judged as on a painted sign."""
+    opinion = _opinion(('40', '60', '80', 'no_sign', 'other_sign'),
+                       ('60', '80', 'no_sign', 'other_sign'))
+    reads_sixty = np.asarray([-0.9, 0.8, -0.95, -0.95, -1.0])
+    ranked = ['40', '60', '80']
+    correlation = [('40', 12.1), ('60', 11.5), ('80', 10.5)]
+    assert opinion.choose(reads_sixty, ranked, 4, 0.6, 1.2, correlation) == '40'
+    assert opinion.choose(reads_sixty, ranked, 4, 0.6, 1.2, correlation,
+                          lit_face=True) is None
+    reads_forty = np.asarray([0.8, -0.8, -0.95, -0.95, -1.0])
+    assert opinion.choose(reads_forty, ranked, 4, 0.6, 1.2, correlation,
+                          lit_face=True) == '40'
+    # a painted sign's rules otherwise: a real leader is answered as before
+    assert opinion.choose(reads_sixty, ['60', '80'], 4, 0.6, 1.2,
+                          [('60', 12.0), ('80', 9.0)], lit_face=True) == '60'

@@ -18,6 +18,7 @@ from speed_sign_detector.recognition.sign_designs import (
 )
 from speed_sign_detector.recognition.sign_polarity import (
     BLOOM_GAMMA,
+    is_lit_face,
     is_lit_on_dark,
     may_be_lit_on_dark,
     painted_polarity,
@@ -59,6 +60,28 @@ def test_polarity_tells_led_from_painted_signs(design: str) -> None:
                         wrong.append((kind, diameter, background, look,
                                       polarity_measures(crop, centre, centre, diameter / 2.0)))
     assert not wrong, wrong
+
+
+@pytest.mark.parametrize('design', DESIGNS)
+def test_lit_face_tells_dark_on_lit_signs_from_the_others(design: str) -> None:
+    """The dark-on-lit electronic sign (a glowing face in a gantry's black housing) has a
+    lit face; painted and yellow signs in daylight surroundings and signs lit on a dark
+    face do not (a painted face before black passes too: the rule it feeds only withholds
+    more)."""
+    background = 25.0 if design.startswith('led') else 120.0
+    wrong = []
+    for kind in ('30', '80', '120'):
+        for diameter in (20, 40):
+            for look in LOOKS:
+                crop = _crop(kind, design, diameter, background, look)
+                centre = crop.shape[0] / 2.0
+                if is_lit_face(crop, centre, centre, diameter / 2.0) != (
+                        design == 'led_dark_on_lit'):
+                    wrong.append((kind, diameter, look))
+    assert not wrong, wrong
+    flat = np.full((40, 40), 250, np.uint8)
+    assert not is_lit_face(flat, 20.0, 20.0, 15.0)  # a bright face, no dark surround
+    assert not is_lit_face(flat, 20.0, 20.0, float('nan'))
 
 
 def test_flat_and_unusable_windows_are_not_lit_on_dark() -> None:

@@ -437,7 +437,8 @@ class Classifier:
                                     [(name, psr) for name, (_, psr) in
                                      zip(labels, evidence.ranked)],
                                     config.crop_rendered_only_min_score if crop else None,
-                                    lit_on_dark=evidence.inverted)
+                                    lit_on_dark=evidence.inverted,
+                                    lit_face=reading.lit_face)
             if (choice is not None and not crop and choice.isdigit()
                     and choice not in opinion.labels_with_crops
                     and top_psr < config.frame_value_without_crops_min_psr):

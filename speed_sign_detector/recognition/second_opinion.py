@@ -27,6 +27,9 @@ value, rank such signs right far more often. Hence:
   of any value shows that design, the model learned every value of it from renderings
   alike (:func:`.sign_designs.design_training_crops`), so it can vouch against such a
   class there as well as against any other: the leader stands only as the model's best.
+  So it does on a sign with a lit face (:func:`.sign_polarity.is_lit_face`: a glowing
+  face in dark surroundings, an electronic sign of the rarer dark-on-lit polarity, read
+  painted), whose bloom thins the dark strokes until the correlation finds a 40 in a 60.
 - Where the correlation finds such a class nearly as well as its leading limit (within
   :data:`UNSEEN_RUNNER_UP_PSR`), the model cannot tell the two apart: withheld.
 - Overruling the correlation's leading limit with another limit where either is known
@@ -218,8 +221,8 @@ class SecondOpinion:
     def choose(self, scores: np.ndarray, ranked_labels: Sequence[str], candidates: int,
                min_lead: float, overrule_lead: float = 0.0,
                correlation: Sequence[tuple[str, float]] = (),
-               rendered_only_floor: float | None = None, lit_on_dark: bool = False
-               ) -> str | None:
+               rendered_only_floor: float | None = None, lit_on_dark: bool = False,
+               lit_face: bool = False) -> str | None:
         """The label to answer for one sign, or ``None`` to withhold.
 
         Args:
@@ -240,6 +243,9 @@ class SecondOpinion:
             lit_on_dark: the sign was read inverted (an electronic sign lit on a dark
                 face): a correlation leader known from renderings only stands only where
                 it is the model's best label.
+            lit_face: the sign, read painted, has a glowing face in dark surroundings
+                (:func:`.sign_polarity.is_lit_face`): such a leader stands only where it
+                is the model's best label too; the other rules are those of a painted sign.
 
         Returns:
             One of ``ranked_labels`` or ``None``.
@@ -254,7 +260,7 @@ class SecondOpinion:
         leader = distinct[0]
         if leader not in self.real_labels:
             if self._reads_rendered_only(scores, order, leader, rendered_only_floor,
-                                         lit_on_dark):
+                                         lit_on_dark or lit_face):
                 return leader
             if leader.isdigit() and not lit_on_dark:
                 # a model that never saw this value's real pixels rejects them on weak
@@ -314,12 +320,12 @@ class SecondOpinion:
         return self.real_labels if self.crop_labels is None else self.crop_labels
 
     def _reads_rendered_only(self, scores: np.ndarray, order: np.ndarray, label: str,
-                             lower_floor: float | None = None, lit_on_dark: bool = False
+                             lower_floor: float | None = None, best_only: bool = False
                              ) -> bool:
         """Whether the model's ``scores`` let the correlation's answer ``label``, a class
-        it learned from renderings only, stand (see the module's rules; ``lower_floor``
-        and ``lit_on_dark``: :meth:`choose`'s ``rendered_only_floor`` and
-        ``lit_on_dark``)."""
+        it learned from renderings only, stand (see the module's rules; ``lower_floor``:
+        :meth:`choose`'s ``rendered_only_floor``; ``best_only``: only as the model's best
+        label, for :meth:`choose`'s ``lit_on_dark`` and ``lit_face``)."""
         if label not in self.labels:
             return False
         index = self.labels.index(label)
@@ -330,7 +336,7 @@ class SecondOpinion:
             floor = min(floor, lower_floor)
         if best == index:
             return float(scores[index]) >= floor
-        if lit_on_dark:
+        if best_only:
             return False  # the model learned this design of every value alike
         rank = int(np.sum(scores > scores[index]))
         return (rank <= RENDERED_ONLY_MAX_RANK

@@ -23,6 +23,10 @@ strict one as unsure (:attr:`Polarity.UNSURE`, :func:`sign_polarity`): a single 
 digit, whose digit box is mostly dark face, and a small sign whose ring of lamps blurs into
 its face. The classifier reads such a sign inverted too where its painted reading is weak.
 
+:func:`is_lit_face` tells the rarer electronic polarity (dark digits on a lit face) from
+a sign in daylight: a glowing face in the dark housing of a gantry display. The classifier
+reads such a sign painted; its second opinion only trusts it less (:mod:`.second_opinion`).
+
 :func:`painted_polarity` turns a window of a sign lit on a dark face into the painted
 templates' polarity, damping the bloom of its lamps on the way (:data:`BLOOM_GAMMA`).
 """
@@ -35,10 +39,12 @@ import cv2
 import numpy as np
 
 __all__ = ['BLOOM_GAMMA', 'BLOOM_LEVELS_PERCENTILES', 'DIGIT_BOX', 'FACE_CAPS',
+           'LIT_FACE_MAX_SURROUND_RATIO', 'LIT_FACE_MIN_LEVEL', 'LIT_FACE_PERCENTILE',
+           'LIT_FACE_SURROUND_RADII',
            'MAX_FACE_TO_DIGITS', 'MIN_CONTRAST', 'MIN_DIGIT_CONTRAST', 'RING_RADII',
            'UNSURE_MAX_FACE_TO_LAMPS', 'UNSURE_MIN_LAMP_CONTRAST', 'UNSURE_MIN_RING_CONTRAST',
            'WINDOW_PX',
-           'Polarity', 'is_lit_on_dark', 'may_be_lit_on_dark', 'painted_polarity',
+           'Polarity', 'is_lit_face', 'is_lit_on_dark', 'may_be_lit_on_dark', 'painted_polarity',
            'polarity_measures', 'sign_polarity']
 
 #: Side of the square window the levels are taken on, pixels (the sign is resampled to
@@ -70,6 +76,25 @@ UNSURE_MAX_FACE_TO_LAMPS = 0.5
 #: :func:`may_be_lit_on_dark`: least contrast of the ring over the face, gray levels (a
 #: small sign's thin ring of lamps blurs into its face).
 UNSURE_MIN_RING_CONTRAST = 5.0
+
+#: :func:`is_lit_face`: the least gray level of the face's caps nearly everywhere (their
+#: :data:`LIT_FACE_PERCENTILE`): a lit face glows near white all over (rendered dark-on-lit
+#: signs: 216 at the 5th percentile), where a painted sign's face in daylight, or one lit
+#: bright on part of its face, is not (gtsrb-dev 70s read right that a test on the caps'
+#: median took: 112 to 197).
+LIT_FACE_MIN_LEVEL = 200.0
+#: :func:`is_lit_face`: the percentile of the face's caps compared with
+#: :data:`LIT_FACE_MIN_LEVEL`.
+LIT_FACE_PERCENTILE = 10.0
+#: :func:`is_lit_face`: the largest ratio of the surround's level (the median of
+#: :data:`LIT_FACE_SURROUND_RADII`) to the face's. Rendered dark-on-lit signs show 0.11 in
+#: the median, 0.17 at the 95th percentile; gtsrb-dev: 133 of 4,400 limit crops and 25 of
+#: 4,000 look-alikes pass both (a bright face before dark trees), 1 of 450 rendered
+#: painted signs.
+LIT_FACE_MAX_SURROUND_RATIO = 0.2
+#: :func:`is_lit_face`: the surround, from just outside the sign to the window's edge,
+#: fractions of the sign radius (a crop's margin is about 0.1 of the radius or more).
+LIT_FACE_SURROUND_RADII = (1.04, 1.25)
 
 #: :func:`painted_polarity`: the power applied to the lit levels (0 at the window's dark
 #: level, 1 at its brightest) before they are inverted. A camera sees a lit sign's lamps
@@ -217,6 +242,41 @@ def may_be_lit_on_dark(gray: np.ndarray, x_px: float, y_px: float, radius_px: fl
     inverted only where its painted reading is weak and the inverted one clear
     (:mod:`.candidate_evidence`)."""
     return sign_polarity(gray, x_px, y_px, radius_px) is Polarity.UNSURE
+
+
+@functools.lru_cache(maxsize=2)
+def _lit_face_masks(window_px: int) -> tuple[np.ndarray, np.ndarray]:
+    """Flat indices of the face's caps and of the surround in a window whose half side is
+    :data:`LIT_FACE_SURROUND_RADII` [1] sign radii."""
+    centre = (window_px - 1) / 2.0
+    rows, cols = np.mgrid[:window_px, :window_px]
+    half = window_px / 2.0 / LIT_FACE_SURROUND_RADII[1]  # pixels per sign radius
+    dy, dx = (rows - centre) / half, (cols - centre) / half
+    distance = np.hypot(dy, dx)
+    caps = np.flatnonzero((distance <= FACE_CAPS[0]) & (np.abs(dy) >= FACE_CAPS[1]))
+    surround = np.flatnonzero(distance >= LIT_FACE_SURROUND_RADII[0])
+    return caps, surround
+
+
+def is_lit_face(gray: np.ndarray, x_px: float, y_px: float, radius_px: float) -> bool:
+    """True when the sign at (x, y) of ``radius_px`` (outer radius, pixels) in the (H, W)
+    uint8 ``gray`` image has a glowing face in dark surroundings: its face's caps at least
+    :data:`LIT_FACE_MIN_LEVEL` nearly everywhere (:data:`LIT_FACE_PERCENTILE`) and the
+    surround (:data:`LIT_FACE_SURROUND_RADII`, border
+    pixels replicated outside the image) at most :data:`LIT_FACE_MAX_SURROUND_RATIO` of
+    the face. An electronic sign of the rarer polarity (dark digits on a lit face in a
+    gantry's black housing) passes, and so does a painted sign lit bright before a dark
+    background; a painted sign in daylight, an electronic sign lit on a dark face and an
+    unusable position or radius do not."""
+    if not (radius_px > 0 and np.isfinite(radius_px) and np.isfinite(x_px)
+            and np.isfinite(y_px)):
+        return False
+    window = _window(gray, float(x_px), float(y_px),
+                     float(radius_px) * LIT_FACE_SURROUND_RADII[1]).ravel()
+    caps, surround = _lit_face_masks(WINDOW_PX)
+    face = float(np.percentile(window[caps], LIT_FACE_PERCENTILE))
+    return (face >= LIT_FACE_MIN_LEVEL
+            and _median(window[surround]) <= LIT_FACE_MAX_SURROUND_RATIO * face)
 
 
 def painted_polarity(lit_window: np.ndarray) -> np.ndarray:

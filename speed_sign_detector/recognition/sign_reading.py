@@ -16,6 +16,7 @@ import numpy as np
 from speed_sign_detector.recognition.candidate_evidence import CorrelationEvidence
 from speed_sign_detector.recognition.real_filters import fused_label_order
 from speed_sign_detector.recognition.sign_features import aligned_patches, sign_features
+from speed_sign_detector.recognition.sign_polarity import is_lit_face
 from speed_sign_detector.recognition.trained_bank import TrainedBank
 
 __all__ = ['SignReading', 'read_signs']
@@ -29,10 +30,13 @@ class SignReading:
         opinion_scores: (C,) the second opinion's score of each of its labels.
         ranking: the labels, best first, by the rendered and the real filters together;
             ``None`` without real filters (the rendered filters' ranking stands).
+        lit_face: the sign has a glowing face in dark surroundings
+            (:func:`.sign_polarity.is_lit_face`, at the located centre and radius).
     """
 
     opinion_scores: np.ndarray
     ranking: list[str] | None
+    lit_face: bool = False
 
 
 def read_signs(bank: TrainedBank, gray: np.ndarray, found: Sequence[CorrelationEvidence]
@@ -58,8 +62,12 @@ def read_signs(bank: TrainedBank, gray: np.ndarray, found: Sequence[CorrelationE
     patches = aligned_patches(gray, np.asarray([[evidence.x_px, evidence.y_px,
                                                  evidence.radius_px] for evidence in found]))
     scores = bank.second_opinion.scores(sign_features(patches))
+    lit = [is_lit_face(gray, evidence.x_px, evidence.y_px, evidence.radius_px)
+           for evidence in found]
     if bank.real_filters is None:
-        return [SignReading(row, None) for row in scores]
-    return [SignReading(row, fused_label_order(evidence.ranked, bank.real_filters, psr))
-            for row, evidence, psr in zip(scores, found, bank.real_filters.psr(patches),
-                                          strict=True)]
+        return [SignReading(row, None, lit_face) for row, lit_face in zip(scores, lit)]
+    return [SignReading(row, fused_label_order(evidence.ranked, bank.real_filters, psr),
+                        lit_face)
+            for row, evidence, psr, lit_face in zip(scores, found,
+                                                    bank.real_filters.psr(patches), lit,
+                                                    strict=True)]
