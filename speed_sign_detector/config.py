@@ -252,6 +252,13 @@ class ClassifierConfig:
         'signs read as 5 or 40 (gtsdb-dev, 5 folds by scene: 5 of the 9 false limits in 466 '
         'frames, every one under PSR 9.5, went; no limit sign fewer recognized).',
         low=0.0, high=1000.0)
+    frame_second_opinion_psr_threshold: float = setting(
+        5.5, 'Frames (not crops): second_opinion_psr_threshold for a candidate of a frame, '
+        'the PSR below which its answer is "no sign" (below psr_threshold the second '
+        'opinion must still lead by second_opinion_low_psr_lead, and the other frame rules '
+        'hold). Small far signs peak weakly (gtsdb-dev, 5 folds by scene, re-decided on '
+        'recorded looks: 5.5 instead of 6 recognized 2 more of 284 limit signs, radii 5 and 8 px, '
+        'the same 2 false limits in 466 frames).', low=0.0, high=1000.0)
     frame_overrule_min_psr: float = setting(
         8.0, 'Frames (not crops): the least correlation PSR for the second opinion to answer '
         "a limit other than the correlation's leading label; on weaker peaks that answer is "

@@ -254,6 +254,37 @@ def test_frames_overrule_the_correlation_only_on_a_clear_peak(
     assert lenient.decide(gray, weak).label == '30'
 
 
+def test_frames_have_their_own_floor_of_the_correlation_psr(
+        classifier: Classifier, config: ClassifierConfig, monkeypatch) -> None:
+    """With a second opinion, a frame's candidate is answered down to
+    ``frame_second_opinion_psr_threshold`` and a crop down to
+    ``second_opinion_psr_threshold``: a peak between the two is read in the one and
+    withheld in the other; below both it is withheld in either."""
+    opinion = classifier.trained_bank.second_opinion
+    assert opinion is not None
+    frame_floor = config.frame_second_opinion_psr_threshold
+    crop_floor = config.second_opinion_psr_threshold
+    assert frame_floor < crop_floor < config.psr_threshold
+    scores = np.full(len(opinion.labels), -1.0, np.float32)
+    scores[opinion.labels.index('30')] = 1.0  # the model is sure: a 30
+    monkeypatch.setattr(classifier, 'sign_reading',
+                        lambda gray, evidence: SignReading(scores, None))
+    gray = np.full((100, 100), 128, np.uint8)
+
+    def evidence(psr: float) -> CorrelationEvidence:
+        return CorrelationEvidence((('30', psr), ('70', psr - 2.0), ('20', psr - 2.5),
+                                    ('50', psr - 3.0)), 50.0, 50.0, 20.0, 0.0, 9.0)
+
+    between = evidence((frame_floor + crop_floor) / 2)
+    assert classifier.decide(gray, between).label == '30'
+    assert classifier.decide(gray, between, crop=True).label == LABEL_NO_SIGN
+    below = evidence(frame_floor - 0.1)
+    assert classifier.decide(gray, below).label == LABEL_NO_SIGN
+    assert classifier.decide(gray, below, crop=True).label == LABEL_NO_SIGN
+    above = evidence(crop_floor + 0.1)
+    assert classifier.decide(gray, above, crop=True).label == '30'
+
+
 class _TwoLooks:
     """A :class:`~.crop_reading.CropReader` whose first look and framed look answer as
     given (their evidence is the answer itself)."""

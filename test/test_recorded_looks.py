@@ -227,8 +227,8 @@ def test_the_bench_records_the_scene_folds_it_replays(tmp_path: Path, capsys) ->
     for key in ('recognized', 'false_limits', 'frames'):
         assert replayed[key] == report[key], key
     assert replayed['recognized'] > 0
-    costs = redecide_rules.rule_costs(path, {
-        'withhold all': 'classifier.second_opinion_psr_threshold=1000'})
+    costs = redecide_rules.rule_costs(path, {  # frames have their own floor
+        'withhold all': 'classifier.frame_second_opinion_psr_threshold=1000'})
     assert costs['rules']['withhold all'] == {'limit signs': {
         'right': -report['recognized'], 'another_limit': -report['false_limits']}}
 

@@ -17,6 +17,9 @@ from speed_sign_detector.recognition.second_opinion import (
     RENDERED_ONLY_MAX_GAP,
     RENDERED_ONLY_MAX_RANK,
     RENDERED_ONLY_MIN_SCORE,
+    UNSEEN_RUNNER_UP_CLOSE_PSR,
+    UNSEEN_RUNNER_UP_DISMISS_LEAD,
+    UNSEEN_RUNNER_UP_DISMISSED_SCORE,
     UNSEEN_RUNNER_UP_PSR,
     SecondOpinion,
 )
@@ -108,6 +111,52 @@ def test_second_opinion_withholds_a_limit_close_to_one_it_cannot_vouch_against()
     assert opinion.choose(reads_80, ['80', '30'], 3, 0.2, 1.0, real_close) == '80'
     # without the correlation's PSRs there is no such check
     assert opinion.choose(reads_80, ['80', '60', '30'], 3, 0.2, 1.0) == '80'
+
+
+def _network_opinion(labels: tuple[str, ...], real: tuple[str, ...]) -> SecondOpinion:
+    """A network-form opinion (one member, one hidden unit): :meth:`choose` takes the
+    scores as given, the form decides which rules apply."""
+    size = len(labels)
+    return SecondOpinion(labels, np.zeros(1, np.float32), np.ones(1, np.float32),
+                         np.zeros((1, 1, size), np.float32), np.zeros((1, size), np.float32),
+                         real, hidden_weights=np.zeros((1, 1, 1), np.float32),
+                         hidden_bias=np.zeros((1, 1), np.float32))
+
+
+def test_a_network_that_dismisses_the_close_unseen_limit_answers_the_leader() -> None:
+    """The network form answers the correlation's leader despite a limit it knows from
+    renderings only within UNSEEN_RUNNER_UP_PSR, where it agrees with the leader with a
+    lead of UNSEEN_RUNNER_UP_DISMISS_LEAD, scores that limit at most
+    UNSEEN_RUNNER_UP_DISMISSED_SCORE, and the limit lies at least UNSEEN_RUNNER_UP_CLOSE_PSR
+    below the leader; any one of these missing, the answer is withheld as before."""
+    labels, real = ('30', '40', '80', 'other_sign'), ('30', '80', 'other_sign')
+    network = _network_opinion(labels, real)
+    assert network.form == 'network'
+    dismissed = UNSEEN_RUNNER_UP_DISMISSED_SCORE - 0.0005
+    reads_80 = np.asarray([1.0 - UNSEEN_RUNNER_UP_DISMISS_LEAD - 0.05, dismissed, 1.0, -1.0])
+    gap = (UNSEEN_RUNNER_UP_CLOSE_PSR + UNSEEN_RUNNER_UP_PSR) / 2
+    assert UNSEEN_RUNNER_UP_CLOSE_PSR < gap < UNSEEN_RUNNER_UP_PSR
+    between = [('80', 12.0), ('40', 12.0 - gap), ('30', 9.0)]
+    ranked = ['80', '40', '30']
+    assert network.choose(reads_80, ranked, 3, 0.2, 1.0, between) == '80'
+    # the same scores in the linear form: no dismissal, withheld
+    assert _opinion(labels, real).choose(reads_80, ranked, 3, 0.2, 1.0, between) is None
+    # the unseen limit scored above the dismissed score: withheld
+    sees_40 = reads_80.copy()
+    sees_40[1] = UNSEEN_RUNNER_UP_DISMISSED_SCORE + 0.0005
+    assert network.choose(sees_40, ranked, 3, 0.2, 1.0, between) is None
+    # a lead under UNSEEN_RUNNER_UP_DISMISS_LEAD: withheld
+    unsure = reads_80.copy()
+    unsure[0] = 1.0 - UNSEEN_RUNNER_UP_DISMISS_LEAD + 0.05
+    assert network.choose(unsure, ranked, 3, 0.2, 1.0, between) is None
+    # the unseen limit within UNSEEN_RUNNER_UP_CLOSE_PSR of the leader: withheld
+    close = [('80', 12.0), ('40', 12.0 - UNSEEN_RUNNER_UP_CLOSE_PSR / 2), ('30', 9.0)]
+    assert network.choose(reads_80, ranked, 3, 0.2, 1.0, close) is None
+    # the model's best label not the leader (it would overrule the 30 leading): withheld
+    overrules = [('30', 12.0), ('40', 12.0 - gap), ('80', 11.5)]
+    assert network.choose(reads_80, ['30', '40', '80'], 3, 0.2, 0.5, overrules) is None
+    far_40 = [('30', 12.0), ('80', 11.5), ('40', 12.0 - UNSEEN_RUNNER_UP_PSR - 0.1)]
+    assert network.choose(reads_80, ['30', '80', '40'], 3, 0.2, 0.5, far_40) == '80'
 
 
 def test_second_opinion_answers_no_label_the_correlation_barely_sees() -> None:

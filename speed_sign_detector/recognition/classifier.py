@@ -19,7 +19,8 @@ Method (DAGM 2010, section 4), per candidate:
 3. Below ``psr_threshold``, or for a limit ahead of another label by less than
    ``min_margin``, the answer is "no sign" (a wrong limit is worse than none). With a
    trained bank its second opinion decides among the leading classes (or withholds);
-   it may then answer down to ``second_opinion_psr_threshold`` when it leads clearly.
+   it may then answer down to ``second_opinion_psr_threshold`` (a frame's candidates:
+   ``frame_second_opinion_psr_threshold``) when it leads clearly.
    A limit whose digits begin or end a longer limit's (:data:`LONGER_PARTNERS`: 30 of
    130) is withheld where the correlation scores that longer limit nearly as high
    (:data:`PARTNER_PSR_GAP`): the longer sign with its outer digit lost.
@@ -393,12 +394,18 @@ class Classifier:
                              evidence: CorrelationEvidence, opinion: SecondOpinion | None
                              ) -> bool:
         """True when the correlation evidence alone withholds the answer (before any
-        second opinion): its PSR is too small, or the sign is cut by the border of the
-        (H, W) ``shape`` frame (``None``: a crop, whose border cuts no sign)."""
+        second opinion): its PSR is too small (with a second opinion:
+        ``second_opinion_psr_threshold`` for a crop, ``frame_second_opinion_psr_threshold``
+        for a frame's candidate), or the sign is cut by the border of the (H, W) ``shape``
+        frame (``None``: a crop, whose border cuts no sign)."""
         config = self.config
         top_psr = evidence.ranked[0][1]
-        if top_psr < (config.psr_threshold if opinion is None
-                      else config.second_opinion_psr_threshold):
+        if opinion is None:
+            floor = config.psr_threshold
+        else:
+            floor = config.second_opinion_psr_threshold if shape is None \
+                else config.frame_second_opinion_psr_threshold
+        if top_psr < floor:
             return True
         if shape is None:
             return False
