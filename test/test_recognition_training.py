@@ -436,10 +436,12 @@ def test_design_renderings_join_the_rendered_training_crops() -> None:
 
 
 def test_weak_correlation_peaks_need_a_clear_second_opinion() -> None:
-    """Between second_opinion_psr_threshold and psr_threshold an answer needs the second
+    """Between the lower threshold (a frame's frame_second_opinion_psr_threshold; a
+    crop's second_opinion_psr_threshold) and psr_threshold an answer needs the second
     opinion's larger lead; below the lower threshold, and without a second opinion below
     psr_threshold, the answer is withheld."""
     config = dataclasses.replace(SMALL, psr_threshold=8.0, second_opinion_psr_threshold=7.0,
+                                 frame_second_opinion_psr_threshold=7.0,
                                  second_opinion_low_psr_lead=0.5)
     labels = ('30', '80', 'other_sign')
     size = len(labels)
