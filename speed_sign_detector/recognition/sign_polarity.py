@@ -111,16 +111,28 @@ BLOOM_GAMMA = 1.5
 BLOOM_LEVELS_PERCENTILES = (10.0, 99.5)
 
 
+def _window_grid(window_px: int, half_side_radii: float = 1.0
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(dy, dx, distance) of each pixel of a (window_px, window_px) window from its
+    centre, in sign radii, for a window whose half side is ``half_side_radii`` radii."""
+    centre = (window_px - 1) / 2.0
+    rows, cols = np.mgrid[:window_px, :window_px]
+    half = window_px / 2.0 / half_side_radii  # pixels per sign radius
+    dy, dx = (rows - centre) / half, (cols - centre) / half
+    return dy, dx, np.hypot(dy, dx)
+
+
+def _caps(dy: np.ndarray, distance: np.ndarray) -> np.ndarray:
+    """Flat indices of the face's caps (:data:`FACE_CAPS`) of :func:`_window_grid`'s grid."""
+    return np.flatnonzero((distance <= FACE_CAPS[0]) & (np.abs(dy) >= FACE_CAPS[1]))
+
+
 @functools.lru_cache(maxsize=4)
 def _masks(window_px: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Flat indices of the face's caps, the digit box and the ring annulus in a window
     whose sign radius is half its side."""
-    centre = (window_px - 1) / 2.0
-    rows, cols = np.mgrid[:window_px, :window_px]
-    half = window_px / 2.0
-    dy, dx = (rows - centre) / half, (cols - centre) / half
-    distance = np.hypot(dy, dx)
-    caps = np.flatnonzero((distance <= FACE_CAPS[0]) & (np.abs(dy) >= FACE_CAPS[1]))
+    dy, dx, distance = _window_grid(window_px)
+    caps = _caps(dy, distance)
     box = np.flatnonzero((np.abs(dx) <= DIGIT_BOX[0]) & (np.abs(dy) <= DIGIT_BOX[1]))
     ring = np.flatnonzero((distance >= RING_RADII[0]) & (distance <= RING_RADII[1]))
     return caps, box, ring
@@ -248,14 +260,8 @@ def may_be_lit_on_dark(gray: np.ndarray, x_px: float, y_px: float, radius_px: fl
 def _lit_face_masks(window_px: int) -> tuple[np.ndarray, np.ndarray]:
     """Flat indices of the face's caps and of the surround in a window whose half side is
     :data:`LIT_FACE_SURROUND_RADII` [1] sign radii."""
-    centre = (window_px - 1) / 2.0
-    rows, cols = np.mgrid[:window_px, :window_px]
-    half = window_px / 2.0 / LIT_FACE_SURROUND_RADII[1]  # pixels per sign radius
-    dy, dx = (rows - centre) / half, (cols - centre) / half
-    distance = np.hypot(dy, dx)
-    caps = np.flatnonzero((distance <= FACE_CAPS[0]) & (np.abs(dy) >= FACE_CAPS[1]))
-    surround = np.flatnonzero(distance >= LIT_FACE_SURROUND_RADII[0])
-    return caps, surround
+    dy, _, distance = _window_grid(window_px, LIT_FACE_SURROUND_RADII[1])
+    return _caps(dy, distance), np.flatnonzero(distance >= LIT_FACE_SURROUND_RADII[0])
 
 
 def is_lit_face(gray: np.ndarray, x_px: float, y_px: float, radius_px: float) -> bool:
@@ -263,10 +269,11 @@ def is_lit_face(gray: np.ndarray, x_px: float, y_px: float, radius_px: float) ->
     uint8 ``gray`` image has a glowing face in dark surroundings: its face's caps at least
     :data:`LIT_FACE_MIN_LEVEL` nearly everywhere (:data:`LIT_FACE_PERCENTILE`) and the
     surround (:data:`LIT_FACE_SURROUND_RADII`, border pixels replicated outside the
-    image) at most :data:`LIT_FACE_MAX_SURROUND_RATIO` of the face. An electronic sign of the rarer polarity (dark digits on a lit face in a
-    gantry's black housing) passes, and so does a painted sign lit bright before a dark
-    background; a painted sign in daylight, an electronic sign lit on a dark face and an
-    unusable position or radius do not."""
+    image) at most :data:`LIT_FACE_MAX_SURROUND_RATIO` of the face. An electronic sign of
+    the rarer polarity (dark digits on a lit face in a gantry's black housing) passes,
+    and so does a painted sign lit bright before a dark background; a painted sign in
+    daylight, an electronic sign lit on a dark face and an unusable position or radius do
+    not."""
     if not (radius_px > 0 and np.isfinite(radius_px) and np.isfinite(x_px)
             and np.isfinite(y_px)):
         return False
