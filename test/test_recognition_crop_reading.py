@@ -229,11 +229,14 @@ def test_frames_overrule_the_correlation_only_on_a_clear_peak(
     """In a frame, the second opinion answers a limit other than the correlation's leader
     only where the leader's PSR is at least ``frame_overrule_min_psr`` (a weak peak is
     often clutter it reads a limit in); it may still agree with a weak leader, and a crop
-    (which frames a sign) is overruled on any peak."""
+    (which frames a sign) is overruled on any peak. A model all but certain (a lead of
+    ``second_opinion_certain_lead``) overrules a leader under ``psr_threshold`` in a frame
+    too (:meth:`.SecondOpinion.certain_choice`)."""
     opinion = classifier.trained_bank.second_opinion
     assert opinion is not None and config.frame_overrule_min_psr == 8.0
+    assert config.second_opinion_certain_lead > 1.9
     scores = np.full(len(opinion.labels), -1.0, np.float32)
-    scores[opinion.labels.index('30')] = 1.0  # the model is sure: a 30
+    scores[opinion.labels.index('30')] = 0.9  # the model is sure, short of certain: a 30
     monkeypatch.setattr(classifier, 'sign_reading',
                         lambda gray, evidence: SignReading(scores, None))
     gray = np.full((100, 100), 128, np.uint8)
@@ -252,6 +255,8 @@ def test_frames_overrule_the_correlation_only_on_a_clear_peak(
                          classifier.trained_bank)
     monkeypatch.setattr(lenient, 'sign_reading', lambda gray, evidence: SignReading(scores, None))
     assert lenient.decide(gray, weak).label == '30'
+    scores[opinion.labels.index('30')] = 1.0  # all but certain
+    assert classifier.decide(gray, weak).label == '30'
 
 
 def test_frames_have_their_own_floor_of_the_correlation_psr(

@@ -298,3 +298,32 @@ def test_the_bench_records_and_replays_the_rendered_designs(tmp_path: Path, caps
     # the folders belong to the folds and values modes only
     with pytest.raises(SystemExit):
         redecide_rules.main(['record', 'designs', str(path), str(tmp_path)])
+
+
+def test_a_certain_second_opinion_only_answers_signs_otherwise_withheld(
+        classifier: Classifier) -> None:
+    """``second_opinion_certain_lead`` (:meth:`.SecondOpinion.certain_choice`): set above 2
+    it never answers; set lower, every answer it changes was "no sign" and becomes a limit
+    the bank has real crops of, the same on the crops as on their recorded looks."""
+    rng = np.random.default_rng(5)
+    small = [design_crop(kind, design, int(rng.integers(12, 30)), rng)
+             for kind in ('30', '60', '80', '100', '120', '50')
+             for design in ('painted', 'yellow') for _ in range(6)]
+    records = [record_looks(classifier, crop) for crop in small]
+
+    def answers(lead: float) -> list[str]:
+        config = dataclasses.replace(classifier.config, second_opinion_certain_lead=lead)
+        changed = Classifier(config, classifier.trained_bank)
+        read = [changed.classify_crop(crop).label for crop in small]
+        assert [redecide(changed, looks).label for looks in records] == read
+        return read
+
+    never, eager = answers(2.5), answers(0.0)
+    shipped = answers(ClassifierConfig().second_opinion_certain_lead)
+    with_crops = classifier.trained_bank.second_opinion.labels_with_crops
+    changed = [(before, after) for before, after in zip(never, eager) if before != after]
+    assert changed, 'a lead of 0 answers some crop of this set withheld otherwise'
+    assert any(before != after for before, after in zip(never, shipped))
+    for before, after in changed + list(zip(never, shipped)):
+        assert before == after or (before == 'no_sign' and after in with_crops
+                                   and after.isdigit())

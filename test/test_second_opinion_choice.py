@@ -335,3 +335,44 @@ def test_on_a_lit_face_a_rendered_only_leader_stands_only_as_the_models_best() -
     # a painted sign's rules otherwise: a real leader is answered as before
     assert opinion.choose(reads_sixty, ['60', '80'], 4, 0.6, 1.2,
                           [('60', 12.0), ('80', 9.0)], lit_face=True) == '60'
+
+
+def test_a_model_all_but_certain_answers_a_limit_it_has_real_crops_of() -> None:
+    """:meth:`SecondOpinion.certain_choice` answers the model's best real label where it is
+    a limit with real crops leading by the lead asked for; it overrules the correlation's
+    leader only below ``overrule_below_psr``; a value without real crops with as many
+    digits near or above the answer in the correlation withholds it, unless below it and
+    dismissed by the model; the linear form never answers this way."""
+    labels = real = ('60', '80', '90', '120', 'other_sign')
+    network = dataclasses.replace(_network_opinion(labels, real),
+                                  crop_labels=('60', '80', '120', 'other_sign'))
+    dismissed = UNSEEN_RUNNER_UP_DISMISSED_SCORE - 0.0005
+    certain_80 = np.asarray([-0.99, 0.995, dismissed, -1.0, -1.0])
+    led_by_80 = [('80', 9.0), ('60', 8.5), ('90', 6.0), ('120', 5.0)]
+    assert network.certain_choice(certain_80, led_by_80, 1.98, 8.0) == '80'
+    assert network.certain_choice(certain_80, led_by_80, 1.99, 8.0) is None  # lead 1.985
+    # another leader: overruled only where its PSR is below overrule_below_psr
+    led_by_60 = [('60', 7.5), ('80', 7.0), ('90', 6.0), ('120', 5.0)]
+    assert network.certain_choice(certain_80, led_by_60, 1.98, 8.0) == '80'
+    assert network.certain_choice(certain_80, led_by_60, 1.98, 7.5) is None
+    # 90 (composites only) below the answer within UNSEEN_RUNNER_UP_PSR: stands only
+    # where the model dismisses it
+    near_90 = [('80', 9.0), ('90', 9.0 - UNSEEN_RUNNER_UP_PSR / 2), ('60', 6.0), ('120', 5.0)]
+    assert network.certain_choice(certain_80, near_90, 1.98, 8.0) == '80'
+    sees_90 = certain_80.copy()
+    sees_90[2] = UNSEEN_RUNNER_UP_DISMISSED_SCORE + 0.0005
+    assert network.certain_choice(sees_90, near_90, 1.98, 8.0) is None
+    # 90 above the answer: withheld, dismissed or not (the held-out value leading)
+    led_by_90 = [('90', 7.5), ('80', 7.0), ('60', 6.0), ('120', 5.0)]
+    assert network.certain_choice(certain_80, led_by_90, 1.98, 8.0) is None
+    # a 3-digit value without crops does not guard a 2-digit answer
+    with_130 = ('60', '80', '130', '120', 'other_sign')
+    three_digits = dataclasses.replace(network, labels=with_130, real_labels=with_130)
+    near_130 = [('80', 9.0), ('130', 9.0), ('60', 6.0), ('120', 5.0)]
+    assert three_digits.certain_choice(sees_90, near_130, 1.98, 8.0) == '80'
+    # a best label known from composites only, or not a limit: never
+    certain_90 = np.asarray([-1.0, -1.0, 0.995, -1.0, -1.0])
+    assert network.certain_choice(certain_90, [('90', 9.0), ('80', 5.0)], 1.98, 8.0) is None
+    certain_other = np.asarray([-1.0, -1.0, -1.0, -1.0, 0.995])
+    assert network.certain_choice(certain_other, led_by_80, 1.98, 8.0) is None
+    assert _opinion(labels, real).certain_choice(certain_80, led_by_80, 1.98, 8.0) is None

@@ -438,11 +438,10 @@ class Classifier:
             # a weak correlation peak needs a clearer second opinion
             min_lead = self.trained_bank.min_lead if top_psr >= config.psr_threshold else \
                 max(self.trained_bank.min_lead, config.second_opinion_low_psr_lead)
+            correlation = [(name, psr) for name, (_, psr) in zip(labels, evidence.ranked)]
             choice = opinion.choose(reading.opinion_scores, reading.ranking or labels,
                                     self.trained_bank.candidates, min_lead,
-                                    config.second_opinion_overrule_lead,
-                                    [(name, psr) for name, (_, psr) in
-                                     zip(labels, evidence.ranked)],
+                                    config.second_opinion_overrule_lead, correlation,
                                     config.crop_rendered_only_min_score if crop else None,
                                     lit_on_dark=evidence.inverted,
                                     lit_face=reading.lit_face)
@@ -453,6 +452,10 @@ class Classifier:
             if (choice is not None and not crop and choice.isdigit() and choice != label
                     and top_psr < config.frame_overrule_min_psr):
                 choice = None  # in a frame, a weak peak is clutter the model reads a limit in
+            if choice is None and not evidence.inverted:
+                choice = opinion.certain_choice(reading.opinion_scores, correlation,
+                                                config.second_opinion_certain_lead,
+                                                config.psr_threshold)
             withhold = choice is None
             label = choice if choice is not None else label
         psr = next(p for (_, p), name in zip(evidence.ranked, labels) if name == label)

@@ -53,6 +53,11 @@ value, rank such signs right far more often. Hence:
 Nor does it turn a limit the correlation read first into an end of limit (which would
 drop the limit in force): it withholds the answer instead.
 
+Where these rules withhold a sign, the network form all but certain of a limit it saw
+real crops of may still answer it (:meth:`SecondOpinion.certain_choice`, the classifier's
+``second_opinion_certain_lead``): small far signs whose correlation is lost among the
+values it knows, but never near a value it lacks real crops of.
+
 The model takes standardised :mod:`.sign_features` and has one of two forms, both with
 scores from about -1 to +1 per class, comparable across classes:
 
@@ -337,6 +342,60 @@ class SecondOpinion:
                 model_psr is None or model_psr < correlation[0][1] - CANDIDATE_PSR_GAP):
             return None  # the filters barely see what the model would answer
         return model_best
+
+    def certain_choice(self, scores: np.ndarray, correlation: Sequence[tuple[str, float]],
+                       min_lead: float, overrule_below_psr: float) -> str | None:
+        """The limit the model is all but certain of, for a sign :meth:`choose` withheld.
+
+        The model's best label among its real labels is answered where
+
+        - it is a limit the model was trained on real crops of;
+        - it leads the next real label by at least ``min_lead`` (scores span -1 to +1: a
+          lead of 1.98 is a probability of at least 0.99 against at most 0.01);
+        - it is the correlation's leading label, or that leader's PSR is below
+          ``overrule_below_psr`` (the filters do not see their leader clearly);
+        - no limit the model knows only from composites or renderings, with as many
+          digits, is within :data:`UNSEEN_RUNNER_UP_PSR` of it in the correlation, or
+          above it; one below it counts not where the model dismisses that value
+          (:data:`UNSEEN_RUNNER_UP_DISMISSED_SCORE`). A sign of a value the model lacks
+          real crops of is not turned into its neighbour: with one value's real crops
+          left out of training, the model was all but certain of a neighbour on 2-3 %
+          of that value's crops, most of them with the value leading the correlation.
+
+        Args:
+            scores: (C,) this model's scores of the sign.
+            correlation: the correlation filters' (label, PSR) pairs, best first.
+            min_lead: least lead over the model's next best real label (above 2: never).
+            overrule_below_psr: the correlation leader's PSR below which the answer may
+                be another label than the leader.
+
+        Returns:
+            The limit (km/h string), or ``None``.
+        """
+        if self.form != 'network':
+            return None
+        order = np.argsort(-scores)
+        real = [int(i) for i in order if self.labels[int(i)] in self.real_labels]
+        if len(real) < 2:
+            return None
+        best = self.labels[real[0]]
+        if (not best.isdigit() or best not in self.labels_with_crops
+                or float(scores[real[0]] - scores[real[1]]) < min_lead):
+            return None
+        best_psr = next((psr for label, psr in correlation if label == best), None)
+        if best_psr is None:
+            return None
+        if correlation[0][0] != best and correlation[0][1] >= overrule_below_psr:
+            return None  # the filters see their leader clearly: the model only confirms it
+        crop_labels = self.labels_with_crops
+        if any(label.isdigit() and len(label) == len(best) and label not in crop_labels
+               and psr >= best_psr - UNSEEN_RUNNER_UP_PSR
+               and not (psr < best_psr and label in self.labels
+                        and float(scores[self.labels.index(label)])
+                        <= UNSEEN_RUNNER_UP_DISMISSED_SCORE)
+               for label, psr in correlation):
+            return None  # perhaps a value it lacks real crops of, close in the filters
+        return best
 
     def _dismisses(self, scores: np.ndarray, order: np.ndarray, leader: str, label: str
                    ) -> bool:
