@@ -310,9 +310,7 @@ class SecondOpinion:
                             and self._dismisses(scores, order, leader, label))
                    for label, psr in correlation[1:]):
                 return None  # as close to a value the model cannot vouch against
-        real = [int(i) for i in order if self.labels[int(i)] in self.real_labels]
-        model_best = self.labels[real[0]]
-        lead = float(scores[real[0]] - scores[real[1]]) if len(real) > 1 else np.inf
+        model_best, lead = self._best_real_label(scores, order)
         allowed = [label for label in distinct[:candidates] if label in self.real_labels]
         if model_best not in allowed or lead < min_lead:
             return None
@@ -374,20 +372,15 @@ class SecondOpinion:
         """
         if self.form != 'network':
             return None
-        order = np.argsort(-scores)
-        real = [int(i) for i in order if self.labels[int(i)] in self.real_labels]
-        if len(real) < 2:
-            return None
-        best = self.labels[real[0]]
-        if (not best.isdigit() or best not in self.labels_with_crops
-                or float(scores[real[0]] - scores[real[1]]) < min_lead):
-            return None
+        best, lead = self._best_real_label(scores, np.argsort(-scores))
+        crop_labels = self.labels_with_crops
+        if lead == np.inf or not best.isdigit() or best not in crop_labels or lead < min_lead:
+            return None  # (an infinite lead: a single real label, nothing to lead)
         best_psr = next((psr for label, psr in correlation if label == best), None)
         if best_psr is None:
             return None
         if correlation[0][0] != best and correlation[0][1] >= overrule_below_psr:
             return None  # the filters see their leader clearly: the model only confirms it
-        crop_labels = self.labels_with_crops
         if any(label.isdigit() and len(label) == len(best) and label not in crop_labels
                and psr >= best_psr - UNSEEN_RUNNER_UP_PSR
                and not (psr < best_psr and label in self.labels
@@ -396,6 +389,14 @@ class SecondOpinion:
                for label, psr in correlation):
             return None  # perhaps a value it lacks real crops of, close in the filters
         return best
+
+    def _best_real_label(self, scores: np.ndarray, order: np.ndarray) -> tuple[str, float]:
+        """The best of ``scores`` among the real labels, and its lead over the next real
+        label (``inf`` where there is no other). ``order``: the labels' indices, best
+        score first."""
+        real = [int(i) for i in order if self.labels[int(i)] in self.real_labels]
+        lead = float(scores[real[0]] - scores[real[1]]) if len(real) > 1 else np.inf
+        return self.labels[real[0]], lead
 
     def _dismisses(self, scores: np.ndarray, order: np.ndarray, leader: str, label: str
                    ) -> bool:
