@@ -9,6 +9,7 @@ import numpy as np
 from speed_sign_detector.recognition.classification import LABEL_END_OF_LIMIT
 from speed_sign_detector.recognition.second_opinion import (
     CANDIDATE_PSR_GAP,
+    CERTAIN_CLOSE_RUNNER_UP_DISMISSED_SCORE,
     COMPOSITE_ONLY_ANSWER_LEAD,
     COMPOSITE_ONLY_OVERRULE_LEAD,
     COMPOSITE_ONLY_RUNNER_UP_PSR,
@@ -376,3 +377,22 @@ def test_a_model_all_but_certain_answers_a_limit_it_has_real_crops_of() -> None:
     certain_other = np.asarray([-1.0, -1.0, -1.0, -1.0, 0.995])
     assert network.certain_choice(certain_other, led_by_80, 1.98, 8.0) is None
     assert _opinion(labels, real).certain_choice(certain_80, led_by_80, 1.98, 8.0) is None
+
+
+def test_a_certain_model_dismisses_a_close_value_without_crops_only_when_surer() -> None:
+    """Within UNSEEN_RUNNER_UP_CLOSE_PSR below the answer, a value without real crops counts
+    as dismissed by :meth:`SecondOpinion.certain_choice` only at a score of at most
+    CERTAIN_CLOSE_RUNNER_UP_DISMISSED_SCORE (a held-out 60 at 0.09 PSR below an 80, scored
+    -0.99901, was read as 80); further below, UNSEEN_RUNNER_UP_DISMISSED_SCORE suffices."""
+    labels = real = ('60', '80', 'other_sign')
+    network = dataclasses.replace(_network_opinion(labels, real),
+                                  crop_labels=('80', 'other_sign'))
+    assert CERTAIN_CLOSE_RUNNER_UP_DISMISSED_SCORE < UNSEEN_RUNNER_UP_DISMISSED_SCORE
+    between = (CERTAIN_CLOSE_RUNNER_UP_DISMISSED_SCORE + UNSEEN_RUNNER_UP_DISMISSED_SCORE) / 2
+    dismissed = np.asarray([between, 0.998, -1.0])     # the model's lead 1.998 (over 60)
+    close = [('80', 9.6), ('60', 9.6 - UNSEEN_RUNNER_UP_CLOSE_PSR / 5)]
+    further = [('80', 9.6), ('60', 9.6 - 2 * UNSEEN_RUNNER_UP_CLOSE_PSR)]
+    assert network.certain_choice(dismissed, close, 1.98, 8.0) is None
+    assert network.certain_choice(dismissed, further, 1.98, 8.0) == '80'
+    surer = np.asarray([CERTAIN_CLOSE_RUNNER_UP_DISMISSED_SCORE - 0.00005, 0.998, -1.0])
+    assert network.certain_choice(surer, close, 1.98, 8.0) == '80'
