@@ -19,7 +19,9 @@ wrong (a limit not theirs); the scenes' limit signs recognized and false limits 
 frame. ``--set NAME=VALUE`` changes a constant of
 ``recognition/second_opinion.py`` (``UNSEEN_RUNNER_UP_PSR=1.0``) or a classifier
 parameter (``classifier.min_margin=2``) for that replay. With the rules unchanged the
-replay gives the recorded answers (it checks this and says so). ``costs`` decides each
+replay gives the recorded answers (it checks this and says so); ``--jitter SIGMA`` first
+moves every recorded second-opinion score by normal noise of that size, and the answers
+that then differ are those on a rule's edge (another host's rounding may decide them). ``costs`` decides each
 record again once per withholding rule with that rule turned off (:data:`RULES_OFF`) and
 counts what the rule costs and what it saves: crops it withholds that would be read right
 without it, and crops it keeps from being read as another limit (per record: the folds'
@@ -42,7 +44,7 @@ Usage::
         ../shared/data/gtsrb-dev ../shared/data/gtsrb-lookalikes-dev \\
         --scenes ../shared/data/gtsdb-dev
     python bench/redecide_rules.py replay out/looks_folds.pkl out/looks_values.pkl \\
-        [--set UNSEEN_RUNNER_UP_PSR=1.0] [--json]
+        [--set UNSEEN_RUNNER_UP_PSR=1.0] [--jitter 1e-4] [--json]
     python bench/redecide_rules.py costs out/looks_folds.pkl out/looks_values.pkl [--json]
 """
 from __future__ import annotations
@@ -250,10 +252,14 @@ def _read_record(path: Path) -> dict[str, Any]:
     return recorded
 
 
-def replay(path: Path, classifier_config: ClassifierConfig) -> dict[str, Any]:
+def replay(path: Path, classifier_config: ClassifierConfig, jitter: float = 0.0
+           ) -> dict[str, Any]:
     """The figures of one recorded run decided again (:class:`RecordError` for a file
-    that is not a record)."""
+    that is not a record); ``jitter`` > 0: with every recorded second-opinion score moved
+    by normal noise of that standard deviation first (:func:`jittered`)."""
     recorded = _read_record(path)
+    if jitter > 0:
+        jittered(recorded, jitter)
     changed = 0
     figures: dict[str, Any] = {'mode': recorded['mode'], 'runs': {}}
     everything: list[tuple[str, str, int, int]] = []
@@ -298,6 +304,33 @@ def replay(path: Path, classifier_config: ClassifierConfig) -> dict[str, Any]:
                         'false_limits_per_frame': false_limits / max(frames, 1)})
     figures['answers_changed'] = changed
     return figures
+
+
+def jittered(recorded: dict[str, Any], sigma: float, seed: int = 0) -> None:
+    """Move every second-opinion score of ``recorded`` (each reading's ``opinion_scores``,
+    -1 to +1) by normal noise of standard deviation ``sigma`` (fixed ``seed``), in place:
+    the answers that change are those on a rule's edge, which another host's rounding of
+    the same training may decide otherwise (a held-out 60 scored -0.99901 against a
+    dismissal at -0.999)."""
+    rng = np.random.default_rng(seed)
+
+    def moved(reading: Any) -> Any:
+        if reading is None:
+            return None
+        scores = np.asarray(reading.opinion_scores)
+        noisy = np.clip(scores + rng.normal(0.0, sigma, scores.shape), -1.0, 1.0)
+        return dataclasses.replace(reading, opinion_scores=noisy.astype(scores.dtype))
+
+    for run in recorded['runs'].values():
+        for row in run['rows']:
+            looks = row['looks']
+            if recorded['mode'] == 'scenes':
+                row['looks'] = dataclasses.replace(
+                    looks, first_readings=tuple(map(moved, looks.first_readings)),
+                    retry_readings=tuple(map(moved, looks.retry_readings)))
+            else:
+                row['looks'] = dataclasses.replace(
+                    looks, readings=tuple(map(moved, looks.readings)))
 
 
 def decide_again(recorded: dict[str, Any], classifier_config: ClassifierConfig
@@ -478,6 +511,10 @@ def main(argv: list[str] | None = None) -> int:
     replaying.add_argument('records', type=Path, nargs='+')
     replaying.add_argument('--set', action='append', default=[], metavar='NAME=VALUE')
     replaying.add_argument('--json', action='store_true')
+    replaying.add_argument('--jitter', type=float, default=0.0, metavar='SIGMA',
+                           help='move every recorded second-opinion score by normal noise '
+                                'of this standard deviation before deciding (fixed seed): '
+                                'the answers that then differ sit on a rule\'s edge')
     costing = commands.add_parser('costs', help='what each withholding rule costs and saves')
     costing.add_argument('records', type=Path, nargs='+')
     costing.add_argument('--json', action='store_true')
@@ -511,7 +548,7 @@ def main(argv: list[str] | None = None) -> int:
             if classifier_config is None:
                 results[str(path)] = rule_costs(path)
             else:
-                results[str(path)] = replay(path, classifier_config)
+                results[str(path)] = replay(path, classifier_config, args.jitter)
         except RecordError as err:
             print(f'redecide_rules.py {args.command}: {err}', file=sys.stderr)
             failed += 1

@@ -131,6 +131,24 @@ def test_the_bench_replays_a_record_and_applies_settings(classifier: Classifier,
         redecide_rules.main(['replay', str(path), '--set', 'NO_SUCH_RULE=1'])
 
 
+def test_the_bench_replays_a_record_with_its_scores_jittered(classifier: Classifier, crops,
+                                                           tmp_path: Path, capsys) -> None:
+    """``replay --jitter SIGMA`` moves the recorded second-opinion scores before deciding:
+    a billionth changes no answer of the record, noise as wide as the scores' range
+    changes many, and the record on disk is left as it was."""
+    redecide_rules = bench_module('redecide_rules')
+    path = tmp_path / 'looks.pkl'
+    rows = _write_folds_record(classifier, crops, path)
+    written = path.read_bytes()
+    assert redecide_rules.main(['replay', str(path), '--json', '--jitter', '1e-9']) == 0
+    assert eval_json(capsys.readouterr().out)[str(path)]['answers_changed'] == 0
+    assert redecide_rules.main(['replay', str(path), '--json', '--jitter', '2']) == 0
+    noisy = eval_json(capsys.readouterr().out)[str(path)]
+    answered = sum(row['answer'] != 'no_sign' for row in rows)
+    assert answered > 0 and noisy['answers_changed'] > 0
+    assert path.read_bytes() == written
+
+
 def test_the_bench_counts_what_each_rule_costs_and_saves(classifier: Classifier, crops,
                                                          tmp_path: Path, capsys) -> None:
     redecide_rules = bench_module('redecide_rules')
