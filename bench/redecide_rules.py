@@ -21,7 +21,8 @@ frame. ``--set NAME=VALUE`` changes a constant of
 parameter (``classifier.min_margin=2``) for that replay. With the rules unchanged the
 replay gives the recorded answers (it checks this and says so); ``--jitter SIGMA`` first
 moves every recorded second-opinion score by normal noise of that size, and the answers
-that then differ are those on a rule's edge (another host's rounding may decide them). ``costs`` decides each
+that then differ are those on a rule's edge (another host's rounding may decide them).
+``costs`` decides each
 record again once per withholding rule with that rule turned off (:data:`RULES_OFF`) and
 counts what the rule costs and what it saves: crops it withholds that would be read right
 without it, and crops it keeps from being read as another limit (per record: the folds'
