@@ -22,12 +22,12 @@ parameter (``classifier.min_margin=2``) for that replay. With the rules unchange
 replay gives the recorded answers (it checks this and says so); ``--jitter SIGMA`` first
 moves every recorded second-opinion score by normal noise of that size, and the answers
 that then differ are those on a rule's edge (another host's rounding may decide them).
-``costs`` decides each
-record again once per withholding rule with that rule turned off (:data:`RULES_OFF`) and
-counts what the rule costs and what it saves: crops it withholds that would be read right
-without it, and crops it keeps from being read as another limit (per record: the folds'
-limit crops and look-alikes; the held-out values' crops and the other values' crops of
-their folds; the rendered designs; the scenes' limit signs recognized and false limits).
+``costs`` decides each record again once per withholding rule with that rule turned off
+(:data:`RULES_OFF`) and counts what the rule costs and what it saves: crops it withholds
+that would be read right without it, and crops it keeps from being read as another limit
+(per record: the folds' limit crops and look-alikes; the held-out values' crops and the
+other values' crops of their folds; the rendered designs; the scenes' limit signs
+recognized and false limits).
 
 The pickle holds the banks and numpy arrays: read only files you made. ``record`` writes
 it after each run (a run that fails keeps the runs before it); ``replay`` reports a file
