@@ -400,14 +400,23 @@ class SecondOpinion:
             return None  # the filters see their leader clearly: the model only confirms it
         if any(label.isdigit() and len(label) == len(best) and label not in crop_labels
                and psr >= best_psr - UNSEEN_RUNNER_UP_PSR
-               and not (psr < best_psr and label in self.labels
-                        and float(scores[self.labels.index(label)])
-                        <= (UNSEEN_RUNNER_UP_DISMISSED_SCORE
-                            if psr < best_psr - UNSEEN_RUNNER_UP_CLOSE_PSR
-                            else CERTAIN_CLOSE_RUNNER_UP_DISMISSED_SCORE))
+               and not self._dismisses_below(scores, label, psr, best_psr)
                for label, psr in correlation):
             return None  # perhaps a value it lacks real crops of, close in the filters
         return best
+
+    def _dismisses_below(self, scores: np.ndarray, label: str, psr: float, answer_psr: float
+                         ) -> bool:
+        """Whether ``scores`` dismiss ``label``, a value without real crops that the
+        correlation finds at ``psr`` below the answer's ``answer_psr``: a score of at most
+        :data:`UNSEEN_RUNNER_UP_DISMISSED_SCORE`, or of at most
+        :data:`CERTAIN_CLOSE_RUNNER_UP_DISMISSED_SCORE` within
+        :data:`UNSEEN_RUNNER_UP_CLOSE_PSR` of it (for :meth:`certain_choice`)."""
+        if psr >= answer_psr or label not in self.labels:
+            return False
+        most = UNSEEN_RUNNER_UP_DISMISSED_SCORE if psr < answer_psr - UNSEEN_RUNNER_UP_CLOSE_PSR \
+            else CERTAIN_CLOSE_RUNNER_UP_DISMISSED_SCORE
+        return float(scores[self.labels.index(label)]) <= most
 
     def _best_real_label(self, scores: np.ndarray, order: np.ndarray) -> tuple[str, float]:
         """The best of ``scores`` among the real labels, and its lead over the next real
