@@ -54,6 +54,7 @@ import argparse
 import contextlib
 import dataclasses
 import json
+import math
 import pickle
 import sys
 from collections import Counter
@@ -520,6 +521,8 @@ def main(argv: list[str] | None = None) -> int:
     costing.add_argument('records', type=Path, nargs='+')
     costing.add_argument('--json', action='store_true')
     args = parser.parse_args(argv)
+    if args.command == 'replay' and not (math.isfinite(args.jitter) and args.jitter >= 0):
+        parser.error(f'--jitter {args.jitter}: a standard deviation, 0 or more')
     if args.command == 'record':
         if args.mode == 'values' and args.scenes:
             parser.error('values mode trains without scenes, as make validate-value-holdout')

@@ -147,6 +147,10 @@ def test_the_bench_replays_a_record_with_its_scores_jittered(classifier: Classif
     answered = sum(row['answer'] != 'no_sign' for row in rows)
     assert answered > 0 and noisy['answers_changed'] > 0
     assert path.read_bytes() == written
+    for bad in ('-1e-4', 'nan', 'inf'):
+        with pytest.raises(SystemExit):
+            redecide_rules.main(['replay', str(path), '--jitter', bad])
+        assert '--jitter' in capsys.readouterr().err
 
 
 def test_the_bench_counts_what_each_rule_costs_and_saves(classifier: Classifier, crops,
