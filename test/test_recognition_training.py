@@ -362,6 +362,10 @@ def test_train_command_builds_a_bank_and_reports_bad_input(tmp_path: Path,
     assert provenance['data_folders'] == [str(crop_folder)]
     assert provenance['classifier']['max_radius_px'] == 24.0
     assert provenance['training']['real_filter_weight'] == 0.5
+    # where it was trained: the host and the BLAS kernels, also in the JSON summary
+    assert provenance['host']['cpu_model'] and provenance['host']['blas']
+    assert summary['host'] == provenance['host']
+    assert f'trained on {provenance["host"]["cpu_model"]}' in done.stdout
     assert built.real_filters is not None and built.real_filters.weight == 0.5
     refused = subprocess.run(_train_command() + [
         'build', str(tmp_path / 'y.npz'), str(crop_folder), '--real-filter-weight', '-1'],

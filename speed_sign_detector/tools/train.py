@@ -61,6 +61,7 @@ from speed_sign_detector.training.scene_box_validation import (
 )
 from speed_sign_detector.training.scene_validation import SceneFoldMeasure, validate_by_scene
 from speed_sign_detector.training.track_validation import VARIANTS, cross_validate
+from speed_sign_detector.training.training_host import describe_host
 from speed_sign_detector.training.value_holdout import leave_one_value_out
 
 _DEFAULTS = TrainingConfig()
@@ -242,13 +243,16 @@ def _run_build(args: argparse.Namespace) -> int:
     record = bank.provenance
     summary = {'bank_file': str(args.out), 'bytes': size, 'crops': record['crops'],
                'located': record['located'], 'counts_per_class': record['counts_per_class'],
-               'scene_examples': record['scene_examples'], 'unreadable': record['unreadable']}
+               'scene_examples': record['scene_examples'], 'unreadable': record['unreadable'],
+               'host': record.get('host')}
     print(f'wrote {args.out} ({size / 1e6:.2f} MB) from {record["crops"]} crops '
           f'({record["located"]} located): ' + ', '.join(
               f'{label} {count}' for label, count in record['counts_per_class'].items()))
     if record['scene_examples']:
         print('scene examples (with copies): ' + ', '.join(
             f'{label} {count}' for label, count in record['scene_examples'].items()))
+    if record.get('host'):
+        print(f'trained on {describe_host(record["host"])}')
     for line in record['unreadable']:
         print(f'skipped unreadable crop: {line}')
     if args.json:

@@ -71,6 +71,7 @@ from speed_sign_detector.training.scene_examples import (
     detect_scenes,
     read_scene_examples,
 )
+from speed_sign_detector.training.training_host import training_host
 
 __all__ = ['MIN_LEAD_OF_MODEL', 'SECOND_OPINION_MODELS', 'LocatedCrops', 'TrainingConfig',
            'rendered_classifier', 'scene_examples_of',
@@ -472,7 +473,8 @@ def train_bank(folders: Sequence[Path], classifier_config: ClassifierConfig = Cl
     provenance = {'data_folders': [str(Path(f)) for f in folders],
                   'scene_folders': [str(Path(f)) for f in scene_folders],
                   'unreadable': unreadable + list(scenes.unreadable if scenes else ()),
-                  'classifier': dataclasses.asdict(classifier_config)}
+                  'classifier': dataclasses.asdict(classifier_config),
+                  'host': training_host()}
     bank = train_from_located(located, config, provenance, locate_rendered(classifier, config),
                               scenes)
     _LOG.info('trained on %d crops in %.1f s', len(crops), time.perf_counter() - started)
