@@ -20,6 +20,8 @@ from long_runs_markdown import long_run_lines, summary_rows
 from markdown_tables import number as _number
 from markdown_tables import table as _table
 
+from speed_sign_detector.training.training_host import describe_blas
+
 #: The heading of the node stage fed 1280x720 frames (``run_all_stages.node_hd_stage``).
 HD_NODE_TITLE = 'Node through DDS, an HD camera'
 #: The node stages of a run, by results key: their section headings, in report order.
@@ -90,7 +92,9 @@ def gl_renderer(results: Mapping[str, Any]) -> str:
 
 
 def host_line(results: Mapping[str, Any]) -> str:
-    """The host in words: CPU model, core count, GL renderer, OS, Python, OpenCV."""
+    """The host in words: CPU model, core count, GL renderer, OS, Python, OpenCV, and the
+    BLAS libraries with their kernels where the record has them (another kernel rounds
+    training otherwise)."""
     machine: Mapping[str, Any] = results.get('machine', {})
     cpu = machine.get('cpu_model') or machine.get('processor') or 'unknown CPU'
     detector = results.get('detector')
@@ -98,7 +102,8 @@ def host_line(results: Mapping[str, Any]) -> str:
     kind = ' (a software renderer: the GL work runs on the CPU cores)' if software else ''
     return (f"{cpu}, {machine.get('cpus', '?')} cores; GL renderer {gl_renderer(results)}"
             f"{kind}; {machine.get('platform', '?')}, Python {machine.get('python', '?')}, "
-            f"OpenCV {machine.get('opencv', '?')}")
+            f"OpenCV {machine.get('opencv', '?')}"
+            + (f"; BLAS {describe_blas(machine['blas'])}" if machine.get('blas') else ''))
 
 
 # ------------------------------------------------------------------------------ summary

@@ -137,7 +137,14 @@ def test_summary_is_first_and_names_the_host(markdown: ModuleType) -> None:
     assert machine['cpu_model'] in host
     assert f"{machine['cpus']} cores" in host
     assert results['detector']['renderer'] in host
+    assert 'BLAS' not in host  # a record without BLAS libraries names none
     assert 'Smoke run' not in text
+    results['machine']['blas'] = [{'internal_api': 'openblas', 'prefix': 'libscipy_openblas',
+                                   'version': '0.3.31', 'architecture': 'Haswell',
+                                   'num_threads': 1}]
+    summary = sections(markdown.render_results_markdown(results))['Summary']
+    host = next(line for line in summary.splitlines() if line.startswith('Host:'))
+    assert host.endswith('; BLAS libscipy_openblas 0.3.31 Haswell kernel.'), host
 
 
 def test_summary_sets_ours_against_the_peers(markdown: ModuleType) -> None:

@@ -18,14 +18,15 @@ from __future__ import annotations
 import contextlib
 import os
 import platform
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import cv2
 import numpy as np
 
-__all__ = ['BLAS_KERNEL_VARIABLES', 'blas_libraries', 'cpu_model', 'describe_host',
-           'training_host']
+__all__ = ['BLAS_KERNEL_VARIABLES', 'blas_libraries', 'cpu_model', 'describe_blas',
+           'describe_host', 'training_host']
 
 #: Environment variables that choose the BLAS's kernels or threads; recorded where set.
 BLAS_KERNEL_VARIABLES: tuple[str, ...] = ('OPENBLAS_CORETYPE', 'OPENBLAS_NUM_THREADS',
@@ -69,15 +70,22 @@ def training_host() -> dict[str, Any]:
                             if name in os.environ}}
 
 
-def describe_host(host: dict[str, Any]) -> str:
-    """One line for a person: the CPU and the BLAS kernels of a :func:`training_host`
-    record (``'AMD EPYC (2 CPUs), numpy 2.4.6, libscipy_openblas 0.3.31 SkylakeX kernel'``)."""
-    blas = ', '.join(f'{library.get("prefix") or library.get("internal_api")} '
+def describe_blas(libraries: Sequence[Mapping[str, Any]]) -> str:
+    """The BLAS libraries of a :func:`blas_libraries` list in words
+    (``'libscipy_openblas 0.3.31 SkylakeX kernel, libopenblas 0.3.15 Zen kernel'``), or
+    ``'BLAS unknown'`` for none."""
+    return ', '.join(f'{library.get("prefix") or library.get("internal_api")} '
                      f'{library.get("version")}'
                      + (f' {library["architecture"]} kernel' if library.get('architecture')
-                        else '') for library in host.get('blas', ())) or 'BLAS unknown'
+                        else '') for library in libraries) or 'BLAS unknown'
+
+
+def describe_host(host: Mapping[str, Any]) -> str:
+    """One line for a person: the CPU and the BLAS kernels of a :func:`training_host`
+    record (``'AMD EPYC (2 CPUs), numpy 2.4.6, libscipy_openblas 0.3.31 SkylakeX kernel'``)."""
     chosen = ''.join(f', {name}={value}' for name, value
                      in sorted(host.get('environment', {}).items()))
     cpus = f' ({host["cpus"]} CPUs)' if host.get('cpus') else ''
     numpy_version = f'numpy {host["numpy"]}, ' if host.get('numpy') else ''
-    return f'{host.get("cpu_model") or "unknown CPU"}{cpus}, {numpy_version}{blas}{chosen}'
+    return (f'{host.get("cpu_model") or "unknown CPU"}{cpus}, {numpy_version}'
+            f'{describe_blas(host.get("blas", ()))}{chosen}')
