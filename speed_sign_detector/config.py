@@ -150,6 +150,11 @@ class DetectorConfig:
                                         'than this many voting radii (the larger of the '
                                         'two) to a better one is the same sign and dropped.',
                                         low=0.0, high=10.0)
+    enclosing_ring_ratio: float = setting(
+        2.0, 'Non-maximum suppression keeps a candidate of at least this many times the '
+        'radius of a better one whose centre lies inside it (within 0.6 of its radius): the '
+        'ring of a large sign around its digits\' loops, which vote for circles of their own '
+        '(0 = suppress it as any other).', low=0.0, high=10.0)
     detection_width_px: int = setting(
         960, 'Frames wider than this are scaled down to this width (area averaging, aspect '
         'kept) for detection, which then costs about the same at any camera resolution; '

@@ -4,6 +4,7 @@ Runs the real GL backend (headless EGL; llvmpipe here) and the numpy reference.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import cv2
@@ -11,7 +12,7 @@ import numpy as np
 import pytest
 
 from speed_sign_detector.config import DetectorConfig
-from speed_sign_detector.detection.candidates import Candidate
+from speed_sign_detector.detection.candidates import Candidate, is_same_sign
 from speed_sign_detector.detection.detector import Detector, cpu_detector_advice
 from speed_sign_detector.errors import ConfigError, DetectorError, InvalidFrameError
 
@@ -37,12 +38,12 @@ def ring_frame(width: int, height: int, centre: tuple[float, float], radius: flo
 
 
 def sign_frame(width: int, height: int, corner: tuple[int, int],
-               diameter_px: int) -> tuple[np.ndarray, tuple[float, float]]:
-    """A rendered 50 km/h sign pasted on a gray background; returns (gray, centre)."""
+               diameter_px: int, value: str = '50') -> tuple[np.ndarray, tuple[float, float]]:
+    """A rendered ``value`` km/h sign pasted on a gray background; returns (gray, centre)."""
     from speed_sign_detector.recognition.templates import render_sign
 
     canvas = np.full((height, width, 3), 120, np.uint8)
-    bgr, alpha = render_sign('50', diameter_px)
+    bgr, alpha = render_sign(value, diameter_px)
     x0, y0 = corner
     region = canvas[y0:y0 + diameter_px, x0:x0 + diameter_px].astype(np.float32)
     blended = region * (1.0 - alpha[..., None]) + bgr.astype(np.float32) * alpha[..., None]
@@ -165,15 +166,37 @@ def test_candidates_sorted_suppressed_and_limited(detector: Detector) -> None:
     assert len(candidates) <= detector.config.max_candidates
     scores = [candidate.score for candidate in candidates]
     assert scores == sorted(scores, reverse=True)
+    ratio = detector.config.voting_edge_radius_ratio
     for index, first in enumerate(candidates):
         for second in candidates[index + 1:]:
-            distance = math.hypot(first.x_px - second.x_px, first.y_px - second.y_px)
-            voting_radius = (max(first.radius_px, second.radius_px)
-                             * detector.config.voting_edge_radius_ratio)
-            assert distance >= detector.config.suppression_factor * voting_radius - 1e-3
+            voted = [dataclasses.replace(candidate, radius_px=candidate.radius_px * ratio)
+                     for candidate in (second, first)]
+            assert not is_same_sign(*voted, detector.config.suppression_factor,
+                                    detector.config.enclosing_ring_ratio), (first, second)
     centres = [(60.0, 60.0), (160.0, 70.0), (250.0, 120.0), (90.0, 150.0)]
     for x, y in centres:
         assert any(math.hypot(c.x_px - x, c.y_px - y) <= 1.0 for c in candidates[:4]), (x, y)
+
+
+def test_large_sign_ring_kept_around_its_digits_loops(detector: Detector) -> None:
+    """A rendered 80 of 56 px: the loops of its 8 and its 0 vote for small circles that
+    outscore its ring; the ring is kept beside them (``enclosing_ring_ratio``), where
+    suppressing it as the loops' sign left only their radius to read the sign at."""
+    frame, centre = sign_frame(320, 240, (100, 80), 56, value='80')
+
+    def rings(candidates: tuple[Candidate, ...]) -> list[Candidate]:
+        return [candidate for candidate in candidates
+                if math.hypot(candidate.x_px - centre[0], candidate.y_px - centre[1]) <= 2.0
+                and candidate.radius_px >= 0.5 * 28]
+
+    found = detector.detect(frame)
+    assert any(candidate.radius_px <= 7 and math.hypot(candidate.x_px - centre[0],
+                                                       candidate.y_px - centre[1]) <= 10
+               for candidate in found), found  # the loops still stand, as before
+    assert len(rings(found)) == 1, found
+    with Detector(dataclasses.replace(detector.config, enclosing_ring_ratio=0.0),
+                  backend=detector.backend_name) as suppressing:
+        assert rings(suppressing.detect(frame)) == []
 
 
 def assert_same(first: tuple[Candidate, ...], second: tuple[Candidate, ...]) -> None:

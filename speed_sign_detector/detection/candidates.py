@@ -147,13 +147,38 @@ def _parabola_offset(minus: np.ndarray, centre: np.ndarray, plus: np.ndarray) ->
     return np.clip(offset, -0.5, 0.5).astype(np.float32)
 
 
+#: A candidate encloses a better one (:func:`select_candidates`' ``enclosing_ring_ratio``)
+#: where the better one's centre lies within this fraction of its radius of its centre (a
+#: digit's loop sits within about 0.4 of the voting radius of a sign's ring).
+ENCLOSED_CENTRE_FRACTION = 0.6
+
+
+def is_same_sign(candidate: Candidate, better: Candidate, suppression_factor: float,
+                 enclosing_ring_ratio: float = 0.0) -> bool:
+    """Whether ``candidate`` is the sign of the ``better`` candidate already accepted: its
+    centre lies within ``suppression_factor x`` the larger of the two radii, and it is not
+    a ring of at least ``enclosing_ring_ratio x`` that one's radius around it (its centre
+    within :data:`ENCLOSED_CENTRE_FRACTION` of its radius; 0: no such exception). A large
+    sign's digits (the 0 of an 80, the loops of its 8) vote for small circles of their
+    own that outscore the ring around them: suppressed by them, the sign's ring was lost
+    and the sign read at a loop's radius (two 80s of 56 and 62 px in gtsdb-dev)."""
+    distance = math.hypot(candidate.x_px - better.x_px, candidate.y_px - better.y_px)
+    if distance >= suppression_factor * max(candidate.radius_px, better.radius_px):
+        return False
+    return not (enclosing_ring_ratio > 0.0
+                and candidate.radius_px >= enclosing_ring_ratio * better.radius_px
+                and distance < ENCLOSED_CENTRE_FRACTION * candidate.radius_px)
+
+
 def select_candidates(maxima: BlockMaxima, max_candidates: int, min_score: float,
-                      suppression_factor: float) -> tuple[Candidate, ...]:
+                      suppression_factor: float, enclosing_ring_ratio: float = 0.0
+                      ) -> tuple[Candidate, ...]:
     """Top-N block maxima, best first, with non-maximum suppression.
 
-    A block maximum is dropped when its centre lies within ``suppression_factor x`` the
-    larger of the two radii of an already accepted (better) candidate, so two candidates
-    are never the same sign.
+    A block maximum is dropped when it is the sign of an already accepted (better)
+    candidate (:func:`is_same_sign`: its centre within ``suppression_factor x`` the larger
+    of the two radii, unless it is a ring of at least ``enclosing_ring_ratio x`` the
+    better one's radius around it), so two candidates are never the same sign.
     """
     order = np.argsort(-maxima.score, axis=None, kind='stable')
     scores = maxima.score.ravel()
@@ -164,9 +189,9 @@ def select_candidates(maxima: BlockMaxima, max_candidates: int, min_score: float
         score = float(scores[index])
         if score <= 0.0 or score < min_score or len(accepted) >= max_candidates:
             break
-        x, y, radius = float(xs[index]), float(ys[index]), float(radii[index])
-        if any(math.hypot(x - other.x_px, y - other.y_px)
-               < suppression_factor * max(radius, other.radius_px) for other in accepted):
-            continue
-        accepted.append(Candidate(x, y, radius, score, int(bands[index])))
+        candidate = Candidate(float(xs[index]), float(ys[index]), float(radii[index]), score,
+                              int(bands[index]))
+        if not any(is_same_sign(candidate, other, suppression_factor, enclosing_ring_ratio)
+                   for other in accepted):
+            accepted.append(candidate)
     return tuple(accepted)

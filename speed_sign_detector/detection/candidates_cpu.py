@@ -46,7 +46,8 @@ def select_packed_candidates(packed: Sequence[np.ndarray],
                              stencils: Sequence[VoteStencils], frame_shape: tuple[int, int],
                              block_px: int, normalisers: Sequence[float],
                              max_candidates: int, min_score: float,
-                             suppression_factor: float) -> tuple[Candidate, ...]:
+                             suppression_factor: float, enclosing_ring_ratio: float = 0.0
+                             ) -> tuple[Candidate, ...]:
     """:func:`.candidates.select_candidates` of :func:`packed_block_maxima`, the same
     candidates, locating the best pixel only in the blocks the selection visits (the best
     :data:`FIRST_BLOCKS`, more when suppression leaves too few)."""
@@ -57,7 +58,7 @@ def select_packed_candidates(packed: Sequence[np.ndarray],
     while True:
         maxima = blocks.maxima(order[:visited], shape=(1, min(visited, order.size)))
         candidates = select_candidates(maxima, max_candidates, min_score,
-                                       suppression_factor)
+                                       suppression_factor, enclosing_ring_ratio)
         if (len(candidates) >= max_candidates or visited >= order.size
                 or scores[order[visited]] <= 0.0 or scores[order[visited]] < min_score):
             return candidates

@@ -322,7 +322,7 @@ class Detector:
                     packed, self._cpu.stencils, working.image.shape,
                     self.config.block_size_px, self.score_normalisers,
                     self.config.max_candidates, self.config.min_score,
-                    self.config.suppression_factor)
+                    self.config.suppression_factor, self.config.enclosing_ring_ratio)
             else:
                 edges = compute_edges(working.image, self.config)
                 edged = time.perf_counter()
@@ -338,7 +338,8 @@ class Detector:
         if backend_name != 'cpu':
             candidates = select_candidates(maxima, self.config.max_candidates,
                                            self.config.min_score,
-                                           self.config.suppression_factor)
+                                           self.config.suppression_factor,
+                                           self.config.enclosing_ring_ratio)
         ratio = self.config.voting_edge_radius_ratio
         found = tuple(working.to_full_resolution(
             dataclasses.replace(candidate, radius_px=candidate.radius_px / ratio))

@@ -1,0 +1,63 @@
+"""Non-maximum suppression of the block maxima (``candidates.select_candidates``), exactly:
+hand-made maxima, every backend's selection step."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from speed_sign_detector.config import DetectorConfig
+from speed_sign_detector.detection.candidates import (
+    ENCLOSED_CENTRE_FRACTION,
+    BlockMaxima,
+    Candidate,
+    is_same_sign,
+    select_candidates,
+)
+
+
+def maxima(*blocks: tuple[float, float, float, float]) -> BlockMaxima:
+    """One row of blocks, each (score, x, y, radius)."""
+    score, x_px, y_px, radius_px = (np.asarray([[block[i] for block in blocks]], np.float32)
+                                    for i in range(4))
+    return BlockMaxima(score, x_px, y_px, radius_px, np.zeros_like(score, np.int32))
+
+
+def centres(candidates: tuple[Candidate, ...]) -> list[tuple[float, float, float]]:
+    return [(c.x_px, c.y_px, c.radius_px) for c in candidates]
+
+
+def test_ring_around_a_better_small_circle_is_kept() -> None:
+    # a digit's loop (radius 5, the best score) 4 px from the centre of the sign's ring
+    # (radius 17), and a second loop beside it
+    found = maxima((0.9, 100.0, 104.0, 5.0), (0.8, 100.0, 100.0, 17.0),
+                   (0.7, 109.0, 104.0, 5.0))
+    # kept, the ring suppresses the second loop as its own sign
+    assert centres(select_candidates(found, 7, 0.0, 1.0, 2.0)) == [
+        (100.0, 104.0, 5.0), (100.0, 100.0, 17.0)]
+    # suppressed as the first loop's sign, the ring leaves the loops alone
+    assert centres(select_candidates(found, 7, 0.0, 1.0, 0.0)) == [
+        (100.0, 104.0, 5.0), (109.0, 104.0, 5.0)]
+
+
+@pytest.mark.parametrize('ring', [
+    (100.0, 100.0, 9.0),    # not twice the loop's radius: the same sign
+    (100.0, 113.0, 20.0),   # the loop beyond 0.6 of its radius from its centre
+])
+def test_other_neighbours_stay_suppressed(ring: tuple[float, float, float]) -> None:
+    found = maxima((0.9, 100.0, 100.0, 5.0), (0.8, *ring))
+    assert centres(select_candidates(found, 7, 0.0, 1.0, 2.0)) == [(100.0, 100.0, 5.0)]
+
+
+def test_same_sign_rule() -> None:
+    loop = Candidate(100.0, 100.0, 5.0, 0.9)
+    ring = Candidate(100.0, 100.0 + ENCLOSED_CENTRE_FRACTION * 20.0 - 0.01, 20.0, 0.8)
+    assert not is_same_sign(ring, loop, 1.0, 2.0)
+    assert is_same_sign(ring, loop, 1.0, 0.0)
+    assert is_same_sign(Candidate(100.0, 100.0 + ENCLOSED_CENTRE_FRACTION * 20.0, 20.0, 0.8),
+                        loop, 1.0, 2.0)
+    far = Candidate(130.0, 100.0, 20.0, 0.8)   # 30 px off: another sign in any case
+    assert not is_same_sign(far, loop, 1.0, 0.0)
+
+
+def test_default_keeps_enclosing_rings() -> None:
+    assert DetectorConfig().enclosing_ring_ratio == 2.0
