@@ -29,6 +29,8 @@ def test_every_parameter_has_a_description() -> None:
 
 @pytest.mark.parametrize('values, message', [
     ({'detector.min_radius_px': -1.0}, 'below its minimum'),
+    ({'detector.enclosing_ring_ratio': -1.0}, 'below its minimum'),
+    ({'detector.enclosing_ring_ratio': 'twice'}, 'must be float'),
     ({'detector.polarity': 'sideways'}, 'not one of'),
     ({'detector.max_candidates': 'seven'}, 'must be int'),
     ({'detector.min_radius_px': 30.0, 'detector.max_radius_px': 20.0}, 'larger than'),

@@ -223,9 +223,11 @@ def test_packed_selection_equals_the_reference_selection(max_candidates: int) ->
     packed = voter.packed_votes(compute_edges_fast(gray, config), (320, 240))
     full = packed_block_maxima(packed, voter.stencils, gray.shape, 8, normalisers)
     for suppression in (1.0, 6.0):   # 6 voting radii: most blocks are suppressed
-        expected = select_candidates(full, max_candidates, 0.0, suppression)
-        assert select_packed_candidates(packed, voter.stencils, gray.shape, 8, normalisers,
-                                        max_candidates, 0.0, suppression) == expected
+        for ring_ratio in (config.enclosing_ring_ratio, 0.0):
+            expected = select_candidates(full, max_candidates, 0.0, suppression, ring_ratio)
+            assert select_packed_candidates(packed, voter.stencils, gray.shape, 8,
+                                            normalisers, max_candidates, 0.0, suppression,
+                                            ring_ratio) == expected
 
 
 def test_voting_on_two_threads_equals_one_thread() -> None:

@@ -171,7 +171,7 @@ def is_same_sign(candidate: Candidate, better: Candidate, suppression_factor: fl
 
 
 def select_candidates(maxima: BlockMaxima, max_candidates: int, min_score: float,
-                      suppression_factor: float, enclosing_ring_ratio: float = 0.0
+                      suppression_factor: float, enclosing_ring_ratio: float
                       ) -> tuple[Candidate, ...]:
     """Top-N block maxima, best first, with non-maximum suppression.
 

@@ -46,7 +46,7 @@ def select_packed_candidates(packed: Sequence[np.ndarray],
                              stencils: Sequence[VoteStencils], frame_shape: tuple[int, int],
                              block_px: int, normalisers: Sequence[float],
                              max_candidates: int, min_score: float,
-                             suppression_factor: float, enclosing_ring_ratio: float = 0.0
+                             suppression_factor: float, enclosing_ring_ratio: float
                              ) -> tuple[Candidate, ...]:
     """:func:`.candidates.select_candidates` of :func:`packed_block_maxima`, the same
     candidates, locating the best pixel only in the blocks the selection visits (the best
