@@ -10,9 +10,11 @@ from speed_sign_detector.detection.candidates import (
     ENCLOSED_CENTRE_FRACTION,
     BlockMaxima,
     Candidate,
+    block_maxima,
     is_same_sign,
     select_candidates,
 )
+from speed_sign_detector.detection.voting_numpy import CHANNELS, plan_bands
 
 
 def maxima(*blocks: tuple[float, float, float, float]) -> BlockMaxima:
@@ -20,6 +22,31 @@ def maxima(*blocks: tuple[float, float, float, float]) -> BlockMaxima:
     score, x_px, y_px, radius_px = (np.asarray([[block[i] for block in blocks]], np.float32)
                                     for i in range(4))
     return BlockMaxima(score, x_px, y_px, radius_px, np.zeros_like(score, np.int32))
+
+
+def test_every_band_keeps_its_block_maximum() -> None:
+    """A band that loses a block to a smaller band's better score keeps its own maximum
+    there (slot ``band`` of the block), and the selection sees both."""
+    bands = plan_bands(DetectorConfig())
+    height, width = 64, 64
+    votes = [np.zeros((height // band.target_scale, width // band.target_scale, CHANNELS),
+                      np.float32) for band in bands]
+    # in block (1, 2) (pixels 8-15, 16-23): a loop of radius 5 in band 0 at (20, 9),
+    # weaker votes of a ring of radius 16 in band 2 at (17.5, 9.5) (its level's pixel (4, 2))
+    votes[0][9, 20] = (2.0, 10.0)
+    votes[2][2, 4] = (1.0, 8.0)   # count / weight x the band's scale 2: radius 16
+    normalisers = [0.5] * len(bands)
+    found = block_maxima(votes, bands, (height, width), 8, normalisers)
+    assert found.score.shape == (8, 8, len(bands))
+    np.testing.assert_array_equal(found.band[1, 2], [band.index for band in bands])
+    assert found.score[1, 2, 0] == pytest.approx(1.0)
+    assert found.radius_px[1, 2, 0] == pytest.approx(5.0)
+    assert found.score[1, 2, 2] == pytest.approx(0.5)
+    assert found.radius_px[1, 2, 2] == pytest.approx(16.0)
+    assert (found.x_px[1, 2, 2], found.y_px[1, 2, 2]) == pytest.approx((17.5, 9.5))
+    assert np.count_nonzero(found.score > 0.0) == 2
+    assert [candidate.band for candidate in select_candidates(found, 7, 0.0, 1.0, 2.0)] \
+        == [0, 2]
 
 
 def centres(candidates: tuple[Candidate, ...]) -> list[tuple[float, float, float]]:

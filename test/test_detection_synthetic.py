@@ -199,6 +199,47 @@ def test_large_sign_ring_kept_around_its_digits_loops(detector: Detector) -> Non
         assert rings(suppressing.detect(frame)) == []
 
 
+def faded_ring_sign_frame(value: str, diameter_px: int, corner: tuple[int, int],
+                          ring_alpha: float) -> tuple[np.ndarray, tuple[float, float]]:
+    """A rendered ``value`` sign on a 320x240 gray background whose outer part (beyond
+    0.72 of its radius: the red ring) is blended in at ``ring_alpha`` only, as a faded or
+    backlit ring is; returns (gray, centre)."""
+    from speed_sign_detector.recognition.templates import render_sign
+
+    canvas = np.full((240, 320, 3), 120, np.uint8)
+    bgr, alpha = render_sign(value, diameter_px)
+    rows, cols = np.mgrid[:diameter_px, :diameter_px]
+    middle = (diameter_px - 1) / 2
+    outer = np.hypot(cols - middle, rows - middle) > 0.72 * diameter_px / 2
+    alpha = alpha * np.where(outer, ring_alpha, 1.0)
+    x0, y0 = corner
+    region = canvas[y0:y0 + diameter_px, x0:x0 + diameter_px].astype(np.float32)
+    blended = region * (1.0 - alpha[..., None]) + bgr.astype(np.float32) * alpha[..., None]
+    canvas[y0:y0 + diameter_px, x0:x0 + diameter_px] = np.rint(blended).astype(np.uint8)
+    centre = (x0 + diameter_px / 2 - 0.5, y0 + diameter_px / 2 - 0.5)
+    return cv2.cvtColor(canvas, cv2.COLOR_BGR2GRAY), centre
+
+
+def test_ring_kept_where_smaller_bands_win_its_blocks(detector: Detector) -> None:
+    """An 80 of 42 px with a faded ring: in the block at its centre a smaller band (its
+    digits' loops, the inner face) outscores the ring's band, so a reduction keeping one
+    band per block would lose the ring before the selection. Every band keeps its own
+    block maximum, and the ring is a candidate."""
+    frame, centre = faded_ring_sign_frame('80', 42, (103, 79), ring_alpha=0.3)
+    maxima = detector.block_maxima(frame)
+    assert maxima.score.shape[-1] == len(detector.bands)
+    near = np.hypot(maxima.x_px - centre[0], maxima.y_px - centre[1]) <= 2.0
+    ring = near & (maxima.radius_px >= 0.6 * 21) & (maxima.score > 0.0)
+    assert ring.any()
+    for row, col, band in np.argwhere(ring):
+        assert maxima.band[row, col, band] == band
+        assert maxima.score[row, col, :band].max() > maxima.score[row, col, band]
+    rings = [candidate for candidate in detector.detect(frame)
+             if math.hypot(candidate.x_px - centre[0], candidate.y_px - centre[1]) <= 2.0
+             and candidate.radius_px >= 0.6 * 21]
+    assert len(rings) == 1, rings
+
+
 def assert_same(first: tuple[Candidate, ...], second: tuple[Candidate, ...]) -> None:
     """Equal candidate lists up to float rounding (GL sums votes in a varying order)."""
     assert len(first) == len(second)

@@ -1,14 +1,14 @@
 """Block maxima of the CPU path, straight from its packed vote sums.
 
 :func:`.candidates.block_maxima` (the numpy twin of the GL reduction) takes each band's
-two-channel vote image, finds the best pixel of every block in every band and keeps the
-best band per block. :func:`packed_block_maxima` gives the same result, bit for bit,
-from the CPU path's packed sums (:mod:`.voting_cpu`) with less work: a band's score is
-a non-decreasing function of its packed sum, so it takes each band's block maxima on
-the sums themselves (strided maxima, no score image) and scores only those; it chooses
-the winning band per block first, and scores pixels (and unpacks counts) only in the
-blocks a band wins. :func:`select_packed_candidates` goes further for the detector: it locates only
-the blocks the top-N selection visits.
+two-channel vote image and finds the best pixel of every block in every band.
+:func:`packed_block_maxima` gives the same result, bit for bit, from the CPU path's
+packed sums (:mod:`.voting_cpu`) with less work: a band's score is a non-decreasing
+function of its packed sum, so it takes each band's block maxima on the sums themselves
+(strided maxima, no score image) and scores only those, and it scores pixels (and
+unpacks counts) only in the tiles of the maxima with votes. :func:`select_packed_candidates`
+goes further for the detector: it locates only the (block, band) maxima the top-N
+selection visits.
 """
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ from speed_sign_detector.detection.voting_cpu import VoteStencils
 def packed_block_maxima(packed: Sequence[np.ndarray], stencils: Sequence[VoteStencils],
                         frame_shape: tuple[int, int], block_px: int,
                         normalisers: Sequence[float]) -> BlockMaxima:
-    """Per-block best pixel over all bands, as :func:`.candidates.block_maxima` gives it
+    """Every band's best pixel per block, as :func:`.candidates.block_maxima` gives it
     for the unpacked vote images.
 
     Args:
@@ -49,8 +49,8 @@ def select_packed_candidates(packed: Sequence[np.ndarray],
                              suppression_factor: float, enclosing_ring_ratio: float
                              ) -> tuple[Candidate, ...]:
     """:func:`.candidates.select_candidates` of :func:`packed_block_maxima`, the same
-    candidates, locating the best pixel only in the blocks the selection visits (the best
-    :data:`FIRST_BLOCKS`, more when suppression leaves too few)."""
+    candidates, locating the best pixel only in the (block, band) maxima the selection
+    visits (the best :data:`FIRST_BLOCKS`, more when suppression leaves too few)."""
     blocks = _BandBlocks(packed, stencils, frame_shape, block_px, normalisers)
     scores = blocks.best.ravel()
     order = np.argsort(-scores, kind='stable')   # the reference's visiting order
@@ -66,18 +66,19 @@ def select_packed_candidates(packed: Sequence[np.ndarray],
 
 
 FIRST_BLOCKS = 64
-"""Blocks located first by :func:`select_packed_candidates`, best first."""
+"""(Block, band) maxima located first by :func:`select_packed_candidates`, best first."""
 
 
 class _BandBlocks:
-    """Every band's block maxima and the winning band per block, from the packed sums.
+    """Every band's block maxima, from the packed sums.
 
     A band's score is a non-decreasing function of its packed sum (:func:`_scores`: the
     weight field is the high bits, then float32 roundings and a positive factor), so the
     best score of a block is the score of its largest packed sum: the block maxima are
-    taken on the sums (one pass, no score image) and only the located blocks' pixels are
+    taken on the sums (one pass, no score image) and only the located maxima's pixels are
     scored (where the first best pixel of a tile needs the scores themselves: pixels of
-    equal score may hold different counts).
+    equal score may hold different counts). A maximum is a flat index into the
+    (rows, cols, bands) slots of :class:`~.candidates.BlockMaxima`.
     """
 
     def __init__(self, packed: Sequence[np.ndarray], stencils: Sequence[VoteStencils],
@@ -88,7 +89,7 @@ class _BandBlocks:
         self.packed, self.stencils = packed, stencils
         self.normalisers = tuple(np.float32(normaliser) for normaliser in normalisers)
         self.steps: list[int] = []
-        band_best = np.full((len(packed), rows, cols), -np.inf, np.float32)
+        self.best = np.full((rows, cols, len(packed)), -np.inf, np.float32)
         for index, (sums, band_stencils, normaliser) in enumerate(
                 zip(packed, stencils, self.normalisers, strict=True)):
             step = max(1, block_px // band_stencils.band.target_scale)
@@ -96,29 +97,29 @@ class _BandBlocks:
             # a band's image is never larger than its blocks (H_target = H >> level <=
             # rows x step); the blocks it does not reach stay -inf
             region = _block_max(sums[:rows * step, :cols * step], step)
-            band_best[index, :region.shape[0], :region.shape[1]] = _scores(
+            self.best[:region.shape[0], :region.shape[1], index] = _scores(
                 region, band_stencils, normaliser)
-        self.winner = np.argmax(band_best, axis=0)   # the first band on ties, as the reference
-        self.best = np.take_along_axis(band_best, self.winner[None], axis=0)[0]
         self.cols = cols
 
-    def maxima(self, blocks: np.ndarray, shape: tuple[int, int] | None = None
+    def maxima(self, slots: np.ndarray, shape: tuple[int, ...] | None = None
                ) -> BlockMaxima:
-        """The block maxima of the flat block indices ``blocks`` (located), in an array
-        of ``shape`` (default: the frame's blocks, those not listed empty) or, with a
-        ``shape``, in the order listed."""
-        blocks = blocks[self.best.ravel()[blocks] > 0.0]
+        """The block maxima of the flat (block, band) indices ``slots`` (located), in an
+        array of ``shape`` (default: the frame's (rows, cols, bands), those not listed
+        empty) or, with a ``shape``, in the order listed."""
+        slots = slots[self.best.ravel()[slots] > 0.0]
         if shape is None:
-            shape, slots = self.best.shape, blocks
+            shape, places = self.best.shape, slots
         else:
-            slots = np.arange(blocks.size)
+            places = np.arange(slots.size)
         score = np.full(shape, -1.0, np.float32)
         x_px, y_px, radius_px = (np.zeros(shape, np.float32) for _ in range(3))
         band_index = np.zeros(shape, np.int32)
-        winners = self.winner.ravel()[blocks]
+        blocks, slot_bands = np.divmod(slots, len(self.packed))
+        if shape == self.best.shape:
+            band_index[...] = [stencils.band.index for stencils in self.stencils]
         for index, (sums, stencils, normaliser, step) in enumerate(
                 zip(self.packed, self.stencils, self.normalisers, self.steps)):
-            won = winners == index
+            won = slot_bands == index
             if not np.any(won):
                 continue
             band = stencils.band
@@ -136,7 +137,7 @@ class _BandBlocks:
             qx = block_cols * step + arg % step
             centre, offset_x, offset_y = _peak(sums, stencils, normaliser, qy, qx)
             half_step = 0.5 * (band.target_scale - 1)
-            where = np.unravel_index(slots[won], shape)
+            where = np.unravel_index(places[won], shape)
             score[where] = centre
             x_px[where] = band.target_scale * (qx + offset_x) + half_step
             y_px[where] = band.target_scale * (qy + offset_y) + half_step

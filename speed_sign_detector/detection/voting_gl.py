@@ -212,7 +212,9 @@ class GLVoter:
             self._downsample = self._ctx.compute_shader(DOWNSAMPLE_SOURCE)
             self._ridge = self._ctx.compute_shader(with_constants(RIDGE_SOURCE))
             self._extract = self._ctx.compute_shader(with_constants(EDGES_SOURCE))
+            band_count = f'#version 430\n#define BAND_COUNT {len(self._bands)}'
             self._reduce = self._ctx.compute_shader(REDUCE_SOURCE.replace(
+                '#version 430', band_count, 1).replace(
                 'VOTE_SAMPLER', 'usampler2D' if scatter else 'sampler2D').replace(
                 'VOTES_AT', VOTES_AT_SCATTER if scatter else VOTES_AT_RASTER).replace(
                 'BAND_BLOCKS', ' '.join(f'BAND_BLOCK({band})' for band in range(
@@ -275,20 +277,21 @@ class GLVoter:
         self._released = True
 
     def block_maxima(self, gray: np.ndarray) -> BlockMaxima:
-        """Vote on a validated (H, W) uint8 frame; per-block best pixels (see candidates)."""
+        """Vote on a validated (H, W) uint8 frame; every band's best pixel per block (see
+        candidates)."""
         self._check_thread()
         with self._ctx:  # current on this thread (other detectors may have their own)
             self._run_votes(gray)
             self._reduce_blocks()
             self._calls.finish()  # wait here, without the GIL, rather than in the read
-            raw = np.frombuffer(self._blocks.read(), dtype=np.float32).reshape(-1, 8)
+            raw = np.frombuffer(self._blocks.read(), dtype=np.float32)
             self._stage('readback')
         rows, cols = self._blocks_shape
-        return BlockMaxima(score=raw[:, 0].reshape(rows, cols).copy(),
-                           x_px=raw[:, 1].reshape(rows, cols).copy(),
-                           y_px=raw[:, 2].reshape(rows, cols).copy(),
-                           radius_px=raw[:, 3].reshape(rows, cols).copy(),
-                           band=raw[:, 4].reshape(rows, cols).astype(np.int32))
+        raw = raw.reshape(rows, cols, len(self._bands), 4)
+        band = np.broadcast_to(np.arange(len(self._bands), dtype=np.int32), raw.shape[:3])
+        return BlockMaxima(score=raw[..., 0].copy(), x_px=raw[..., 1].copy(),
+                           y_px=raw[..., 2].copy(), radius_px=raw[..., 3].copy(),
+                           band=band.copy())
 
     def vote_images(self, gray: np.ndarray) -> list[np.ndarray]:
         """Vote images of every band, (H_level, W_level, CHANNELS) float32 each."""
@@ -340,7 +343,8 @@ class GLVoter:
                                            fixed_point))
         block = self._config.block_size_px
         self._blocks_shape = (-(-height // block), -(-width // block))
-        self._blocks = ctx.buffer(reserve=32 * self._blocks_shape[0] * self._blocks_shape[1])
+        self._blocks = ctx.buffer(reserve=16 * len(self._bands) * self._blocks_shape[0]
+                                  * self._blocks_shape[1])
         self._size = (width, height)
 
     def _release_size_resources(self) -> None:
@@ -474,7 +478,7 @@ class GLVoter:
                 self._calls.memory_barrier()
 
     def _reduce_blocks(self) -> None:
-        """One dispatch: per 8x8 block, the best vote pixel over every band."""
+        """One dispatch: per 8x8 block, the best vote pixel of every band."""
         rows, cols = self._blocks_shape
         self._blocks.bind_to_storage_buffer(2)
         reduce = self._reduce

@@ -323,8 +323,8 @@ layout(local_size_x = 8, local_size_y = 8) in;
 // fixed-point integers in the band's part of the group's R32UI image, packed into one
 // integer when count_bits[b] > 0, else n at q + count_offset[b]
 layout(binding = 0) uniform VOTE_SAMPLER votes[MAX_BANDS];
-struct Best { vec4 score_x_y_radius; vec4 band_unused; };
-layout(std430, binding = 2) writeonly buffer Blocks { Best blocks[]; };
+// per block and band (index block * BAND_COUNT + band): score, centre x, y, radius
+layout(std430, binding = 2) writeonly buffer Blocks { vec4 blocks[]; };
 uniform ivec2 blocks_size;
 uniform ivec2 level_size[MAX_BANDS];
 uniform int block_level_px[MAX_BANDS];
@@ -351,8 +351,10 @@ float offset(float minus, float centre, float plus) {
     if (curvature >= 0.0) return 0.0;
     return clamp(0.5 * (minus - plus) / curvature, -0.5, 0.5);
 }
-// the best pixel of band B in this block (B a constant: llvmpipe indexes sampler arrays
-// with a constant fast, with a variable very slowly)
+// the best pixel of band B in this block (the first of equal scores, row-major; B a
+// constant: llvmpipe indexes sampler arrays with a constant fast, with a variable very
+// slowly), refined to sub-pixel with a parabola through its neighbours, written to the
+// band's slot of the block (score -1: no positive score)
 #define BAND_BLOCK(B) { \\
     float best = -1.0; \\
     ivec2 best_q = ivec2(0); \\
@@ -366,7 +368,8 @@ float offset(float minus, float centre, float plus) {
             if (s > best) { best = s; best_q = q; } \\
         } \\
     } \\
-    if (best > 0.0 && best > winner_score) { \\
+    int slot = index * BAND_COUNT + band_index[B]; \\
+    if (best > 0.0) { \\
         float ox = offset(score_clamped(B, best_q - ivec2(1, 0)), best, \\
                           score_clamped(B, best_q + ivec2(1, 0))); \\
         float oy = offset(score_clamped(B, best_q - ivec2(0, 1)), best, \\
@@ -374,30 +377,18 @@ float offset(float minus, float centre, float plus) {
         vec2 band_votes = votes_at(B, best_q); \\
         float step = float(target_scale[B]); \\
         float half_step = 0.5 * (step - 1.0); \\
-        winner_score = best; \\
-        winner = B; \\
-        winner_centre = step * (vec2(best_q) + vec2(ox, oy)) + half_step; \\
-        winner_radius = band_votes.y / band_votes.x * float(scale[B]); \\
+        blocks[slot] = vec4(best, step * (vec2(best_q) + vec2(ox, oy)) + half_step, \\
+                            band_votes.y / band_votes.x * float(scale[B])); \\
+    } else { \\
+        blocks[slot] = vec4(-1.0, 0.0, 0.0, 0.0); \\
     } \\
 }
-// One invocation per block: the best vote pixel over all bands (the first of equal
-// scores, bands in order), refined to sub-pixel with a parabola through its neighbours.
+// One invocation per block: the best vote pixel of every band.
 void main() {
     ivec2 block = ivec2(gl_GlobalInvocationID.xy);
     if (block.x >= blocks_size.x || block.y >= blocks_size.y) return;
     int index = block.y * blocks_size.x + block.x;
-    float winner_score = -1.0;
-    int winner = -1;
-    vec2 winner_centre = vec2(0.0);
-    float winner_radius = 0.0;
     BAND_BLOCKS
-    if (winner < 0) {
-        blocks[index].score_x_y_radius = vec4(-1.0, 0.0, 0.0, 0.0);
-        blocks[index].band_unused = vec4(0.0);
-        return;
-    }
-    blocks[index].score_x_y_radius = vec4(winner_score, winner_centre, winner_radius);
-    blocks[index].band_unused = vec4(float(band_index[winner]), 0.0, 0.0, 0.0);
 }
 """
 
