@@ -10,6 +10,7 @@ from speed_sign_detector.detection.candidates import (
     ENCLOSED_CENTRE_FRACTION,
     BlockMaxima,
     Candidate,
+    best_first,
     block_maxima,
     is_same_sign,
     select_candidates,
@@ -22,6 +23,25 @@ def maxima(*blocks: tuple[float, float, float, float]) -> BlockMaxima:
     score, x_px, y_px, radius_px = (np.asarray([[block[i] for block in blocks]], np.float32)
                                     for i in range(4))
     return BlockMaxima(score, x_px, y_px, radius_px, np.zeros_like(score, np.int32))
+
+
+def test_best_first_is_a_prefix_of_the_stable_order() -> None:
+    """The partial order the selection visits is the stable sort's prefix, ties (equal
+    scores, -inf) included, and at least as long as asked for."""
+    generator = np.random.default_rng(3)
+    scores = np.round(generator.normal(size=500), 1).astype(np.float32)  # many ties
+    scores[::7] = -np.inf
+    full = np.argsort(-scores, kind='stable')
+    for count in (0, 1, 5, 64, 499, 500, 2000):
+        order = best_first(scores, count)
+        assert order.size >= min(count, scores.size)
+        np.testing.assert_array_equal(order, full[:order.size])
+    # the selection over a frame's maxima visits them in that order whatever it sorts first
+    found = maxima(*[(float(score), 20.0 * index, 0.0, 5.0)
+                     for index, score in enumerate(scores)])
+    expected = [(20.0 * int(index), 0.0, 5.0) for index in full[:40]
+                if scores[index] > 0.0]
+    assert centres(select_candidates(found, 40, 0.0, 1.0, 2.0)) == expected
 
 
 def test_every_band_keeps_its_block_maximum() -> None:

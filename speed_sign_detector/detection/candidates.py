@@ -185,18 +185,41 @@ def select_candidates(maxima: BlockMaxima, max_candidates: int, min_score: float
     of the two radii, unless it is a ring of at least ``enclosing_ring_ratio x`` the
     better one's radius around it), so two candidates are never the same sign.
     """
-    order = np.argsort(-maxima.score, axis=None, kind='stable')
     scores = maxima.score.ravel()
     xs, ys = maxima.x_px.ravel(), maxima.y_px.ravel()
     radii, bands = maxima.radius_px.ravel(), maxima.band.ravel()
     accepted: list[Candidate] = []
-    for index in order:
-        score = float(scores[index])
-        if score <= 0.0 or score < min_score or len(accepted) >= max_candidates:
-            break
-        candidate = Candidate(float(xs[index]), float(ys[index]), float(radii[index]), score,
-                              int(bands[index]))
-        if not any(is_same_sign(candidate, other, suppression_factor, enclosing_ring_ratio)
-                   for other in accepted):
-            accepted.append(candidate)
-    return tuple(accepted)
+    visited, count = 0, FIRST_SORTED
+    while True:
+        order = best_first(scores, count)   # its first `visited` are those visited already
+        for index in order[visited:]:
+            score = float(scores[index])
+            if score <= 0.0 or score < min_score or len(accepted) >= max_candidates:
+                return tuple(accepted)
+            candidate = Candidate(float(xs[index]), float(ys[index]), float(radii[index]),
+                                  score, int(bands[index]))
+            if not any(is_same_sign(candidate, other, suppression_factor,
+                                    enclosing_ring_ratio) for other in accepted):
+                accepted.append(candidate)
+        if order.size >= scores.size:
+            return tuple(accepted)
+        visited, count = order.size, 4 * count
+
+
+FIRST_SORTED = 64
+"""Block maxima :func:`select_candidates` sorts first (more, four times as many each
+time, when suppression leaves too few candidates)."""
+
+
+def best_first(scores: np.ndarray, count: int) -> np.ndarray:
+    """Indices of the flat ``scores`` (N,) in the selection's visiting order (best first,
+    the first index of equal scores first: a stable sort), at least its first ``count``
+    of them (all N where ``count >= N``): the scores at or above the ``count``-th best,
+    found by a partition, then sorted. A frame holds 4 bands x 4,800 blocks at 640x480,
+    and a full sort of them cost about 1 ms of the detector's 16."""
+    if count >= scores.size:
+        return np.argsort(-scores, kind='stable')
+    count = max(count, 1)
+    threshold = np.partition(scores, scores.size - count)[scores.size - count]
+    chosen = np.flatnonzero(scores >= threshold)
+    return chosen[np.argsort(-scores[chosen], kind='stable')]

@@ -19,6 +19,7 @@ import numpy as np
 from speed_sign_detector.detection.candidates import (
     BlockMaxima,
     Candidate,
+    best_first,
     select_candidates,
     subpixel_offsets,
 )
@@ -53,9 +54,9 @@ def select_packed_candidates(packed: Sequence[np.ndarray],
     visits (the best :data:`FIRST_BLOCKS`, more when suppression leaves too few)."""
     blocks = _BandBlocks(packed, stencils, frame_shape, block_px, normalisers)
     scores = blocks.best.ravel()
-    order = np.argsort(-scores, kind='stable')   # the reference's visiting order
     visited = FIRST_BLOCKS
     while True:
+        order = best_first(scores, visited + 1)   # one more than visited, for the check
         maxima = blocks.maxima(order[:visited], shape=(1, min(visited, order.size)))
         candidates = select_candidates(maxima, max_candidates, min_score,
                                        suppression_factor, enclosing_ring_ratio)
@@ -63,6 +64,7 @@ def select_packed_candidates(packed: Sequence[np.ndarray],
                 or scores[order[visited]] <= 0.0 or scores[order[visited]] < min_score):
             return candidates
         visited *= 4
+
 
 
 FIRST_BLOCKS = 64
