@@ -38,12 +38,20 @@ def ring_frame(width: int, height: int, centre: tuple[float, float], radius: flo
 
 
 def sign_frame(width: int, height: int, corner: tuple[int, int],
-               diameter_px: int, value: str = '50') -> tuple[np.ndarray, tuple[float, float]]:
-    """A rendered ``value`` km/h sign pasted on a gray background; returns (gray, centre)."""
+               diameter_px: int, value: str = '50', ring_alpha: float = 1.0
+               ) -> tuple[np.ndarray, tuple[float, float]]:
+    """A rendered ``value`` km/h sign pasted on a gray background; returns (gray, centre).
+    ``ring_alpha`` < 1 blends the sign's outer part (beyond 0.72 of its radius: the red
+    ring) in at that opacity only, as a faded or backlit ring is."""
     from speed_sign_detector.recognition.templates import render_sign
 
     canvas = np.full((height, width, 3), 120, np.uint8)
     bgr, alpha = render_sign(value, diameter_px)
+    if ring_alpha != 1.0:
+        rows, cols = np.mgrid[:diameter_px, :diameter_px]
+        middle = (diameter_px - 1) / 2
+        outer = np.hypot(cols - middle, rows - middle) > 0.72 * diameter_px / 2
+        alpha = alpha * np.where(outer, ring_alpha, 1.0)
     x0, y0 = corner
     region = canvas[y0:y0 + diameter_px, x0:x0 + diameter_px].astype(np.float32)
     blended = region * (1.0 - alpha[..., None]) + bgr.astype(np.float32) * alpha[..., None]
@@ -199,33 +207,12 @@ def test_large_sign_ring_kept_around_its_digits_loops(detector: Detector) -> Non
         assert rings(suppressing.detect(frame)) == []
 
 
-def faded_ring_sign_frame(value: str, diameter_px: int, corner: tuple[int, int],
-                          ring_alpha: float) -> tuple[np.ndarray, tuple[float, float]]:
-    """A rendered ``value`` sign on a 320x240 gray background whose outer part (beyond
-    0.72 of its radius: the red ring) is blended in at ``ring_alpha`` only, as a faded or
-    backlit ring is; returns (gray, centre)."""
-    from speed_sign_detector.recognition.templates import render_sign
-
-    canvas = np.full((240, 320, 3), 120, np.uint8)
-    bgr, alpha = render_sign(value, diameter_px)
-    rows, cols = np.mgrid[:diameter_px, :diameter_px]
-    middle = (diameter_px - 1) / 2
-    outer = np.hypot(cols - middle, rows - middle) > 0.72 * diameter_px / 2
-    alpha = alpha * np.where(outer, ring_alpha, 1.0)
-    x0, y0 = corner
-    region = canvas[y0:y0 + diameter_px, x0:x0 + diameter_px].astype(np.float32)
-    blended = region * (1.0 - alpha[..., None]) + bgr.astype(np.float32) * alpha[..., None]
-    canvas[y0:y0 + diameter_px, x0:x0 + diameter_px] = np.rint(blended).astype(np.uint8)
-    centre = (x0 + diameter_px / 2 - 0.5, y0 + diameter_px / 2 - 0.5)
-    return cv2.cvtColor(canvas, cv2.COLOR_BGR2GRAY), centre
-
-
 def test_ring_kept_where_smaller_bands_win_its_blocks(detector: Detector) -> None:
     """An 80 of 42 px with a faded ring: in the block at its centre a smaller band (its
     digits' loops, the inner face) outscores the ring's band, so a reduction keeping one
     band per block would lose the ring before the selection. Every band keeps its own
     block maximum, and the ring is a candidate."""
-    frame, centre = faded_ring_sign_frame('80', 42, (103, 79), ring_alpha=0.3)
+    frame, centre = sign_frame(320, 240, (103, 79), 42, value='80', ring_alpha=0.3)
     maxima = detector.block_maxima(frame)
     assert maxima.score.shape[-1] == len(detector.bands)
     near = np.hypot(maxima.x_px - centre[0], maxima.y_px - centre[1]) <= 2.0
