@@ -44,6 +44,30 @@ def test_best_first_is_a_prefix_of_the_stable_order() -> None:
     assert centres(select_candidates(found, 40, 0.0, 1.0, 2.0)) == expected
 
 
+def test_selection_visits_more_maxima_where_suppression_leaves_too_few() -> None:
+    """Where the best maxima are mostly one sign's (suppressed), the selection visits four
+    times as many again and again, and selects what a plain pass over every maximum in
+    the stable order selects (written out here, independently)."""
+    generator = np.random.default_rng(11)
+    count = 2000
+    # 1,600 maxima crowd around 8 signs (suppressed by the best of each), then 400 apart
+    crowded = generator.integers(0, 8, 1600)
+    x_px = np.concatenate([100.0 * crowded + generator.uniform(-3, 3, 1600),
+                           1000.0 + 30.0 * np.arange(400)])
+    score = np.concatenate([generator.uniform(0.5, 1.0, 1600),
+                            generator.uniform(0.01, 0.5, 400)]).astype(np.float32)
+    found = maxima(*[(float(score[i]), float(x_px[i]), 0.0, 5.0) for i in range(count)])
+    plain: list[Candidate] = []
+    for index in np.argsort(-score, kind='stable'):
+        candidate = Candidate(float(found.x_px[0, index]), 0.0, 5.0, float(score[index]), 0)
+        if len(plain) < 40 and not any(is_same_sign(candidate, other, 1.0, 2.0)
+                                       for other in plain):
+            plain.append(candidate)
+    selected = select_candidates(found, 40, 0.0, 1.0, 2.0)
+    assert len(selected) == 40 and list(selected) == plain
+    assert len({round(c.x_px, -2) for c in selected if c.x_px < 900}) == 8
+
+
 def test_every_band_keeps_its_block_maximum() -> None:
     """A band that loses a block to a smaller band's better score keeps its own maximum
     there (slot ``band`` of the block), and the selection sees both."""

@@ -5,7 +5,7 @@ The result type :class:`Candidate` is shared by every backend.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -185,29 +185,50 @@ def select_candidates(maxima: BlockMaxima, max_candidates: int, min_score: float
     of the two radii, unless it is a ring of at least ``enclosing_ring_ratio x`` the
     better one's radius around it), so two candidates are never the same sign.
     """
-    scores = maxima.score.ravel()
-    xs, ys = maxima.x_px.ravel(), maxima.y_px.ravel()
-    radii, bands = maxima.radius_px.ravel(), maxima.band.ravel()
+    fields = (maxima.score.ravel(), maxima.x_px.ravel(), maxima.y_px.ravel(),
+              maxima.radius_px.ravel(), maxima.band.ravel())
+    return select_best_first(fields[0], lambda slots: tuple(field[slots] for field in fields),
+                             max_candidates, min_score, suppression_factor,
+                             enclosing_ring_ratio)
+
+
+#: ``locate(slots)`` of :func:`select_best_first`: for the flat slots (N,) given, their
+#: (score, x_px, y_px, radius_px, band) arrays (N,), in the order given.
+Locate = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                      np.ndarray]]
+
+
+def select_best_first(scores: np.ndarray, locate: Locate, max_candidates: int,
+                      min_score: float, suppression_factor: float,
+                      enclosing_ring_ratio: float) -> tuple[Candidate, ...]:
+    """:func:`select_candidates` over the flat block-maximum ``scores`` (N,), locating
+    (``locate``) only the maxima it visits: the best :data:`FIRST_VISITED` first, then
+    four times as many each time suppression leaves too few candidates. The CPU path
+    finds a maximum's pixel only when it is located (:mod:`.candidates_cpu`)."""
     accepted: list[Candidate] = []
-    visited, count = 0, FIRST_SORTED
+    visited, count = 0, FIRST_VISITED
     while True:
         order = best_first(scores, count)   # its first `visited` are those visited already
-        for index in order[visited:]:
-            score = float(scores[index])
-            if score <= 0.0 or score < min_score or len(accepted) >= max_candidates:
+        fresh = order[visited:]
+        fresh_scores = scores[fresh]
+        failing = np.flatnonzero((fresh_scores <= 0.0) | (fresh_scores < min_score))
+        usable = fresh[:failing[0]] if failing.size else fresh
+        score, xs, ys, radii, bands = locate(usable)
+        for index in range(usable.size):
+            if len(accepted) >= max_candidates:
                 return tuple(accepted)
             candidate = Candidate(float(xs[index]), float(ys[index]), float(radii[index]),
-                                  score, int(bands[index]))
+                                  float(score[index]), int(bands[index]))
             if not any(is_same_sign(candidate, other, suppression_factor,
                                     enclosing_ring_ratio) for other in accepted):
                 accepted.append(candidate)
-        if order.size >= scores.size:
+        if failing.size or order.size >= scores.size or len(accepted) >= max_candidates:
             return tuple(accepted)
         visited, count = order.size, 4 * count
 
 
-FIRST_SORTED = 64
-"""Block maxima :func:`select_candidates` sorts first (more, four times as many each
+FIRST_VISITED = 64
+"""Block maxima :func:`select_best_first` visits first (more, four times as many each
 time, when suppression leaves too few candidates)."""
 
 

@@ -19,8 +19,7 @@ import numpy as np
 from speed_sign_detector.detection.candidates import (
     BlockMaxima,
     Candidate,
-    best_first,
-    select_candidates,
+    select_best_first,
     subpixel_offsets,
 )
 from speed_sign_detector.detection.voting_cpu import VoteStencils
@@ -51,24 +50,10 @@ def select_packed_candidates(packed: Sequence[np.ndarray],
                              ) -> tuple[Candidate, ...]:
     """:func:`.candidates.select_candidates` of :func:`packed_block_maxima`, the same
     candidates, locating the best pixel only in the (block, band) maxima the selection
-    visits (the best :data:`FIRST_BLOCKS`, more when suppression leaves too few)."""
+    visits (:func:`.candidates.select_best_first`)."""
     blocks = _BandBlocks(packed, stencils, frame_shape, block_px, normalisers)
-    scores = blocks.best.ravel()
-    visited = FIRST_BLOCKS
-    while True:
-        order = best_first(scores, visited + 1)   # one more than visited, for the check
-        maxima = blocks.maxima(order[:visited], shape=(1, min(visited, order.size)))
-        candidates = select_candidates(maxima, max_candidates, min_score,
-                                       suppression_factor, enclosing_ring_ratio)
-        if (len(candidates) >= max_candidates or visited >= order.size
-                or scores[order[visited]] <= 0.0 or scores[order[visited]] < min_score):
-            return candidates
-        visited *= 4
-
-
-
-FIRST_BLOCKS = 64
-"""(Block, band) maxima located first by :func:`select_packed_candidates`, best first."""
+    return select_best_first(blocks.best.ravel(), blocks.locate, max_candidates, min_score,
+                             suppression_factor, enclosing_ring_ratio)
 
 
 class _BandBlocks:
@@ -103,22 +88,30 @@ class _BandBlocks:
                 region, band_stencils, normaliser)
         self.cols = cols
 
-    def maxima(self, slots: np.ndarray, shape: tuple[int, ...] | None = None
-               ) -> BlockMaxima:
-        """The block maxima of the flat (block, band) indices ``slots`` (located), in an
-        array of ``shape`` (default: the frame's (rows, cols, bands), those not listed
-        empty) or, with a ``shape``, in the order listed."""
+    def maxima(self, slots: np.ndarray) -> BlockMaxima:
+        """The frame's :class:`~.candidates.BlockMaxima` with the flat (block, band)
+        indices ``slots`` located (those with a positive score; the others empty)."""
         slots = slots[self.best.ravel()[slots] > 0.0]
-        if shape is None:
-            shape, places = self.best.shape, slots
-        else:
-            places = np.arange(slots.size)
+        shape = self.best.shape
         score = np.full(shape, -1.0, np.float32)
         x_px, y_px, radius_px = (np.zeros(shape, np.float32) for _ in range(3))
         band_index = np.zeros(shape, np.int32)
+        band_index[...] = [stencils.band.index for stencils in self.stencils]
+        where = np.unravel_index(slots, shape)
+        score[where], x_px[where], y_px[where], radius_px[where], band_index[where] = (
+            self.locate(slots))
+        return BlockMaxima(score, x_px, y_px, radius_px, band_index)
+
+    def locate(self, slots: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                 np.ndarray, np.ndarray]:
+        """(score, x_px, y_px, radius_px, band) arrays (N,) of the flat (block, band)
+        indices ``slots`` (N,), in their order: each one's best pixel in its block (the
+        first of equal scores, row-major, as the reference), sub-pixel centre and
+        radius. Every slot listed must have a positive score."""
+        score = np.empty(slots.size, np.float32)
+        x_px, y_px, radius_px = (np.empty(slots.size, np.float32) for _ in range(3))
+        band_index = np.empty(slots.size, np.int32)
         blocks, slot_bands = np.divmod(slots, len(self.packed))
-        if shape == self.best.shape:
-            band_index[...] = [stencils.band.index for stencils in self.stencils]
         for index, (sums, stencils, normaliser, step) in enumerate(
                 zip(self.packed, self.stencils, self.normalisers, self.steps)):
             won = slot_bands == index
@@ -139,13 +132,12 @@ class _BandBlocks:
             qx = block_cols * step + arg % step
             centre, offset_x, offset_y = _peak(sums, stencils, normaliser, qy, qx)
             half_step = 0.5 * (band.target_scale - 1)
-            where = np.unravel_index(places[won], shape)
-            score[where] = centre
-            x_px[where] = band.target_scale * (qx + offset_x) + half_step
-            y_px[where] = band.target_scale * (qy + offset_y) + half_step
-            radius_px[where] = _radius_ratio(sums[qy, qx], stencils) * band.scale
-            band_index[where] = band.index
-        return BlockMaxima(score, x_px, y_px, radius_px, band_index)
+            score[won] = centre
+            x_px[won] = band.target_scale * (qx + offset_x) + half_step
+            y_px[won] = band.target_scale * (qy + offset_y) + half_step
+            radius_px[won] = _radius_ratio(sums[qy, qx], stencils) * band.scale
+            band_index[won] = band.index
+        return score, x_px, y_px, radius_px, band_index
 
 
 def _block_max(image: np.ndarray, step: int) -> np.ndarray:
