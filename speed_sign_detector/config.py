@@ -214,6 +214,15 @@ class ClassifierConfig:
         'gtsdb-dev scene folds 252 -> 254 of 284 signs, nothing more read as another limit '
         'there, in leave one value out or in the rendered designs (1.9: one more false '
         'limit, one more held-out 80 read as 60).', low=0.0, high=10.0)
+    lit_face_min_margin: float = setting(
+        0.75, 'Least PSR lead of a limit answer over every other limit in the correlation on '
+        'a sign with a lit face (a glowing face in dark surroundings: an electronic sign '
+        'with dark digits, or a painted one over-exposed at night); with a smaller lead '
+        'the answer is withheld, the glow thinning the digits\' strokes toward another '
+        'value. Re-decided on recorded looks: rendered designs (30 of each value and '
+        'design, seeds 1 and 2) 8 -> 6 wrong each, dark-on-lit signs 0.931 -> 0.911 and '
+        '0.929 -> 0.904 read right; gtsrb-dev 5 folds by track 4 of 4,480 crops withheld '
+        'that were read right, none fewer read as another limit.', low=0.0, high=1000.0)
     min_margin: float = setting(0.25, 'PSR lead over the best other label below which an '
                                 'end-of-limit answer, and a speed-limit answer without a '
                                 'trained bank, is withheld ("no sign").',

@@ -259,6 +259,39 @@ def test_frames_overrule_the_correlation_only_on_a_clear_peak(
     assert classifier.decide(gray, weak).label == '30'
 
 
+def test_on_a_lit_face_a_limit_needs_a_clear_lead_over_every_other_limit(
+        classifier: Classifier, config: ClassifierConfig, monkeypatch) -> None:
+    """On a sign whose face glows in dark surroundings (``SignReading.lit_face``), a limit
+    the model agrees on is answered only with a PSR lead of ``lit_face_min_margin`` over
+    every other limit the correlation ranks (a non-limit between them does not count);
+    without the glow the same evidence is answered, in a frame and as a crop."""
+    opinion = classifier.trained_bank.second_opinion
+    assert opinion is not None and config.lit_face_min_margin == 0.75
+    scores = np.full(len(opinion.labels), -1.0, np.float32)
+    scores[opinion.labels.index('60')] = 0.9   # the model is sure of the leader, 60
+    lit = [True]
+    monkeypatch.setattr(classifier, 'sign_reading',
+                        lambda gray, evidence: SignReading(scores, None, lit_face=lit[0]))
+    gray = np.full((100, 100), 128, np.uint8)
+
+    def evidence(lead: float) -> CorrelationEvidence:
+        return CorrelationEvidence((('60', 12.0), ('weight_limit', 11.9), ('80', 12.0 - lead),
+                                    ('50', 9.0)), 50.0, 50.0, 20.0, 0.0, 9.0)
+
+    for crop in (False, True):
+        lit[0] = True
+        assert classifier.decide(gray, evidence(0.5), crop=crop).label == LABEL_NO_SIGN
+        assert classifier.decide(gray, evidence(1.0), crop=crop).label == '60'
+        lit[0] = False
+        assert classifier.decide(gray, evidence(0.5), crop=crop).label == '60'
+    lit[0] = True
+    lenient = Classifier(dataclasses.replace(config, lit_face_min_margin=0.0),
+                         classifier.trained_bank)
+    monkeypatch.setattr(lenient, 'sign_reading',
+                        lambda gray, evidence: SignReading(scores, None, lit_face=True))
+    assert lenient.decide(gray, evidence(0.5)).label == '60'
+
+
 def test_frames_have_their_own_floor_of_the_correlation_psr(
         classifier: Classifier, config: ClassifierConfig, monkeypatch) -> None:
     """With a second opinion, a frame's candidate is answered down to

@@ -463,6 +463,11 @@ class Classifier:
         if any(name in partners and p > psr - PARTNER_PSR_GAP
                for (_, p), name in zip(evidence.ranked, labels)):
             withhold = True  # perhaps the longer limit with its outer digit lost
+        if (reading is not None and reading.lit_face and label.isdigit()
+                and psr - max((p for (_, p), name in zip(evidence.ranked, labels)
+                               if name.isdigit() and name != label), default=-np.inf)
+                < config.lit_face_min_margin):
+            withhold = True  # the glow thins dark digits toward a close value
         runner_up = next((p for (_, p), name in zip(evidence.ranked, labels) if name != label),
                          -np.inf)
         margin = psr - runner_up if math.isfinite(runner_up) else psr
