@@ -111,6 +111,7 @@ RULES_OFF: dict[str, str] = {
     'overrule lead (classifier.second_opinion_overrule_lead)':
         'classifier.second_opinion_overrule_lead=0',
     'filters\' margin (classifier.min_margin)': 'classifier.min_margin=0',
+    'lit-face lead (classifier.lit_face_min_margin)': 'classifier.lit_face_min_margin=0',
 }
 
 
