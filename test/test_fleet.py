@@ -347,3 +347,72 @@ def test_fleet_benchmark_projection_is_marked_and_follows_its_rule() -> None:
     table = bench_fleet.format_table({'runs': runs, 'ray_start_s': 10.0,
                                       'frames_per_bag': 90.0, 'projection': projection})
     assert 'PROJECTED, not measured' in table and '1.80' in table
+
+
+class _ReadInterruptedRay:
+    """A stand-in for Ray in the driver's loop: one worker, its bag finishes at once, and
+    Ctrl-C comes as the driver reads that bag's result (``get`` raises
+    KeyboardInterrupt once); after it the result reads as it would."""
+
+    exceptions = ray.exceptions
+
+    def __init__(self, outcome: Any) -> None:
+        self.outcome = outcome
+        self.interrupted = False
+
+    def wait(self, refs: list[Any], num_returns: int = 1, timeout: float | None = None
+             ) -> tuple[list[Any], list[Any]]:
+        finished = [ref for ref in refs if ref[0] == 'evaluate']
+        return finished[:num_returns], []
+
+    def get(self, ref: Any) -> Any:
+        if ref[0] == 'evaluate' and not self.interrupted:
+            self.interrupted = True
+            raise KeyboardInterrupt
+        return self.outcome
+
+    def kill(self, actor: Any) -> None:
+        pass
+
+
+def test_a_bag_finishing_as_ctrl_c_comes_is_kept(tmp_path: Path, monkeypatch) -> None:
+    """Ctrl-C while the driver reads a finished bag's result (its summary written: what
+    the resume test waits for) still counts that bag: its call stays among the running
+    ones until its outcome is kept, and the collection after Ctrl-C reads it."""
+    job = BagJob('bag_key', tmp_path / 'bag', None)
+    outcome = fleet.BagOutcome('bag_key', str(job.bag), True, None, None, 'host:1', 0.0, 1.0)
+    stand_in = _ReadInterruptedRay(outcome)
+
+    class Actor:
+        class evaluate:   # noqa: N801 - the shape of a Ray actor method
+            @staticmethod
+            def remote(job: BagJob) -> tuple[str, str]:
+                return ('evaluate', job.key)
+
+        class progress:   # noqa: N801
+            @staticmethod
+            def remote() -> tuple[str]:
+                return ('progress',)
+
+    class Bar:
+        n = 0
+
+        def update(self, count: int) -> None:
+            pass
+
+        def write(self, text: str, file: Any = None) -> None:
+            pass
+
+        def refresh(self) -> None:
+            pass
+
+    dispatcher = object.__new__(fleet._Dispatcher)
+    dispatcher.ray, dispatcher.actors, dispatcher.on_progress = stand_in, [], None
+    dispatcher.bags_bar, dispatcher.frames_bar = Bar(), Bar()
+    dispatcher.frames_finished, dispatcher.frames_under_way = 0, {}
+    monkeypatch.setattr(dispatcher, '_worker_count', lambda bags: 1, raising=False)
+    monkeypatch.setattr(dispatcher, '_gpus_per_worker', lambda workers: 0.0, raising=False)
+    monkeypatch.setattr(dispatcher, '_new_actor', lambda gpus: Actor(), raising=False)
+    outcomes: dict[str, Any] = {}
+    assert dispatcher.run([job], outcomes) is True   # interrupted
+    assert stand_in.interrupted and outcomes == {'bag_key': outcome}

@@ -254,9 +254,13 @@ class _Dispatcher:
                     if ref in polls:
                         self._progress_answer(ref, *polls.pop(ref), running)
                         continue
-                    job, actor, submitted = running.pop(ref)
+                    # the call stays in `running` until its outcome is kept: Ctrl-C while
+                    # the driver reads a finished bag (just as its summary appeared) must
+                    # leave it to _collect_finished, not lose it
+                    job, actor, submitted = running[ref]
                     outcome, actor_alive = self._result(ref, job, submitted)
                     outcomes[job.key] = outcome
+                    del running[ref]
                     self._finished(outcome)
                     if actor_alive:
                         idle.append(actor)
@@ -289,6 +293,8 @@ class _Dispatcher:
                                      timeout=INTERRUPT_COLLECT_S)
             for ref in ready:
                 job, _, submitted = running.pop(ref)
+                if job.key in outcomes:
+                    continue   # kept just before Ctrl-C came
                 outcome, _ = self._result(ref, job, submitted)
                 if outcome.done:
                     outcomes[job.key] = outcome
