@@ -72,6 +72,9 @@ HOLDOUT_ANOTHER_LIMIT_TARGET = 0.01
 HOLDOUT_MEAN_RIGHT_TARGET = 0.90
 #: Rendered designs: each design.
 DESIGN_RIGHT_TARGET = 0.9
+#: Rendered designs whose target is 0 wrong only: signs a reader should withhold (an LED
+#: sign with rows dark between its lamps' pulses), not read.
+WITHHELD_DESIGNS: frozenset[str] = frozenset({'led_banded'})
 #: Soak, where its JSON states none: RSS growth, %.
 SOAK_RSS_GROWTH_TARGET_PERCENT = 5.0
 #: The designs of ``bench_sign_designs.py`` in words.
@@ -79,7 +82,7 @@ DESIGN_LABELS: dict[str, str] = {
     'painted': 'painted, white face', 'yellow': 'yellow face', 'led': 'LED, white',
     'led_amber': 'LED, amber', 'led_dot_matrix': 'LED, dot matrix',
     'led_dark_on_lit': 'LED, dark on lit', 'end_of_limit': 'end of limit',
-    'end_of_all': 'end of all restrictions'}
+    'end_of_all': 'end of all restrictions', 'led_banded': 'LED, white, rows dark in bands'}
 
 Section = Mapping[str, Any]
 
@@ -362,14 +365,17 @@ def design_lines(designs: Section) -> list[str]:
              f"seed {designs.get('seed', '?')}. Synthetic: ../shared/data holds no LED or "
              f"yellow-faced signs. Right: a limit read as its value, an end sign as an end; "
              f"wrong: any other limit. Target: at least {DESIGN_RIGHT_TARGET} right and 0 "
-             f"wrong for each design.", '']
+             f"wrong for each design; 0 wrong for "
+             f"{', '.join(DESIGN_LABELS.get(name, name) for name in sorted(WITHHELD_DESIGNS))} "
+             f"(rows exposed between the lamps' pulses by a rolling shutter: withheld, or "
+             f"read right).", '']
     rows = []
     for name, row in per_design.items():
         rate = _right_rate(row)
         rows.append([DESIGN_LABELS.get(name, name), str(row['signs']), number(rate, 3),
                      str(row['wrong']), str(row['withheld']),
-                     _met(rate is not None and rate >= DESIGN_RIGHT_TARGET
-                          and row['wrong'] == 0)])
+                     _met(row['wrong'] == 0 and (name in WITHHELD_DESIGNS or (
+                         rate is not None and rate >= DESIGN_RIGHT_TARGET)))])
     lines += table(['design', 'signs', 'read right', 'wrong', 'withheld',
                     f'>= {DESIGN_RIGHT_TARGET} right, 0 wrong'], rows)
     columns = [name for name, row in per_design.items()
@@ -526,7 +532,8 @@ def _summary_row(run: LongRun, figures: Section) -> list[str]:
                 f" right, {percent(held['wrong_limit_rate'])} another limit", '-']
     if run.key == 'sign_designs':
         designs = figures['designs']
-        worst = min(designs, key=lambda name: _right_rate(designs[name]) or 0.0)
+        worst = min((name for name in designs if name not in WITHHELD_DESIGNS),
+                    key=lambda name: _right_rate(designs[name]) or 0.0)
         wrong = sum(row['wrong'] for row in designs.values())
         return ['rendered designs: read right (the worst design); wrong in all',
                 f'{DESIGN_LABELS.get(worst, worst)} {number(_right_rate(designs[worst]), 3)}; '

@@ -115,7 +115,9 @@ def designs_json() -> dict[str, Any]:
                                  {'130 as 120 (17 px)': 1}),
         'end_of_limit': design({'end_of_limit_30': {'right': 6},
                                 'end_of_limit_130': {'right': 6}}, {}),
-        'end_of_all': design({'end_of_restrictions': {'right': 90}}, {})},
+        'end_of_all': design({'end_of_restrictions': {'right': 90}}, {}),
+        'led_banded': design({'30': {'right': 1, 'withheld': 5},
+                              '130': {'withheld': 6}}, {})},
         'seed': 1, 'per_value': 6, 'diameter_px': [15, 60], 'bank_file': 'shipped',
         'elapsed_s': 180.0}
 
@@ -262,18 +264,26 @@ def test_a_note_says_which_run_each_figure_comes_from(markdown: ModuleType) -> N
     assert lines[command + 2].startswith('Host:')
 
 
-def test_designs_rows_and_the_wrong_number(markdown: ModuleType) -> None:
+def test_designs_rows_and_the_wrong_number(markdown: ModuleType, long_runs: ModuleType
+                                           ) -> None:
     text = markdown.render_results_markdown(with_long_runs(sign_designs=designs_json()))
     part = sections(text)['Rendered designs']
     rows = table_rows(part.split('\n### ')[0])
     assert row_starting(rows, 'painted, white face')[1:] == ['12', '1.000', '0', '0', 'yes']
     assert row_starting(rows, 'LED, dot matrix')[1:] == ['12', '0.750', '1', '2', '**no**']
     assert row_starting(rows, 'end of all restrictions')[-1] == 'yes'
+    # rows dark between the lamps' pulses: withheld is right, the target is 0 wrong
+    assert row_starting(rows, 'LED, white, rows dark in bands')[1:] == [
+        '12', '0.083', '0', '11', 'yes']
     per_value = table_rows(part.split('### Read right per value')[1])
-    assert per_value[0] == ['value', 'painted, white face', 'LED, dot matrix', 'end of limit']
-    assert row_starting(per_value, '130')[1:] == ['6/6', '4/6, **1 wrong**', '6/6']
+    assert per_value[0] == ['value', 'painted, white face', 'LED, dot matrix', 'end of limit',
+                            'LED, white, rows dark in bands']
+    assert row_starting(per_value, '130')[1:] == ['6/6', '4/6, **1 wrong**', '6/6', '0/6']
     assert '130 as 120 (17 px) x1' in part
     assert 'bench_sign_designs.py --per-value 30 --seed 1 --json' in part
+    # the summary's worst design is one that should be read, not the banded one
+    summary = long_runs.summary_rows({'sign_designs': designs_json()})
+    assert summary[0][1] == 'LED, dot matrix 0.750; 1 wrong'
 
 
 def test_soak_rows_against_the_targets(markdown: ModuleType) -> None:

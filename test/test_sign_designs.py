@@ -19,6 +19,7 @@ from speed_sign_detector.recognition.sign_designs import (
     design_label,
     design_training_crops,
     lit_on_dark_design,
+    random_look,
     render_design,
 )
 from speed_sign_detector.recognition.templates import (
@@ -141,6 +142,28 @@ def test_unknown_design_or_kind_is_refused() -> None:
         render_design('85', 40, 'led')
     with pytest.raises(DesignError, match='diameter'):
         render_design('80', 3, 'led')
+
+
+def test_dark_bands_darken_whole_rows_of_an_led_sign() -> None:
+    """LedLook's bands (lamps pulsed, a rolling shutter between the pulses): the rows of a
+    band are dark across the sign, the others as the sign lit whole; random_look draws
+    them only where asked; a band look that cannot be drawn is refused."""
+    whole, _ = render_design('80', 60, 'led')
+    banded, _ = render_design('80', 60, 'led', LedLook(band_period=1.0, band_lit_share=0.5,
+                                                        band_phase=0.5))
+    whole_rows = whole.max(axis=(1, 2)).astype(int)
+    banded_rows = banded.max(axis=(1, 2)).astype(int)
+    # band phase 0.5 of a period of one diameter, half of it lit: the top half dark
+    assert banded_rows[3:27].max() <= 40 < whole_rows[3:27].min()
+    assert np.abs(banded_rows[33:57] - whole_rows[33:57]).max() <= 2
+    rng = np.random.default_rng(0)
+    assert random_look('led', rng).band_period == 0.0
+    banded_look = random_look('led', rng, banded=True)
+    assert 0.3 <= banded_look.band_period <= 2.0 and 0.4 <= banded_look.band_lit_share <= 0.85
+    for bad in ({'band_period': -1.0}, {'band_lit_share': 0.0}, {'band_lit_share': 1.5},
+                {'band_phase': float('nan')}):
+        with pytest.raises(DesignError, match='band'):
+            LedLook(**bad)
 
 
 def test_design_crops_and_training_crops() -> None:

@@ -2,6 +2,7 @@
 classifier reads an LED sign as its value or withholds it, never as another value."""
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +21,7 @@ from speed_sign_detector.recognition.sign_polarity import (
     BLOOM_GAMMA,
     is_lit_face,
     is_lit_on_dark,
+    is_partly_unlit,
     may_be_lit_on_dark,
     painted_polarity,
     polarity_measures,
@@ -107,6 +109,59 @@ def test_led_signs_are_read_inverted_as_their_value_or_withheld(
     assert not wrong, wrong
     # read, not only withheld: the inverted patch is read like a painted sign
     assert sum(right) >= 0.75 * len(right), right
+
+
+def _banded(look: LedLook, phase: float) -> LedLook:
+    """``look`` with a dark band of 0.48 diameters per 1.2 (a rolling shutter between the
+    lamps' pulses), starting at ``phase`` of the period."""
+    return dataclasses.replace(look, band_period=1.2, band_lit_share=0.6, band_phase=phase)
+
+
+@pytest.mark.parametrize('design', ['led', 'led_amber', 'led_dot_matrix'])
+def test_dark_rows_of_an_led_sign_are_found(design: str) -> None:
+    """Rows exposed between the lamps' pulses are found on every LED design lit on a dark
+    face, at every size, the band at the top or the bottom; a sign lit whole is not partly
+    unlit."""
+    missed, false = [], []
+    for kind in ('20', '80', '120'):
+        for diameter in (16, 30, 50):
+            for look in LOOKS:
+                whole = _crop(kind, design, diameter, 25.0, look)
+                centre = whole.shape[0] / 2.0
+                if is_partly_unlit(whole, centre, centre, diameter / 2.0):
+                    false.append((kind, diameter, look))
+                for phase in (0.1, 0.6):
+                    banded = _crop(kind, design, diameter, 25.0, _banded(look, phase))
+                    if not is_partly_unlit(banded, centre, centre, diameter / 2.0):
+                        missed.append((kind, diameter, look, phase))
+    assert not false, false
+    assert not missed, missed
+
+
+def test_unusable_windows_have_no_dark_rows() -> None:
+    flat = np.full((40, 40), 90, np.uint8)
+    assert not is_partly_unlit(flat, 20.0, 20.0, 15.0)
+    assert not is_partly_unlit(flat, 20.0, 20.0, 0.0)
+    assert not is_partly_unlit(flat, float('nan'), 20.0, 15.0)
+
+
+def test_an_led_sign_with_dark_rows_is_withheld(classifier: Classifier) -> None:
+    """What the dark rows leave of the digits may spell another value (a 20 without its
+    base reads as a 70): the classifier does not read such a sign (read inverted); lit
+    whole, it does. Painted signs are never tested (a face in shadow may be darker than
+    its ring)."""
+    read_whole = []
+    for value in ('20', '60', '80', '120'):
+        for diameter in (30, 48):
+            whole = _crop(value, 'led', diameter, 25.0)
+            read_whole.append(classifier.classify_crop(whole).label == value)
+            for phase in (0.1, 0.6):
+                banded = _crop(value, 'led', diameter, 25.0, _banded(LedLook(), phase))
+                evidence = classifier.crop_evidence(banded)
+                assert getattr(evidence, 'partly_unlit', True), (value, diameter, phase)
+                answer = classifier.classify_crop(banded)
+                assert not answer.is_limit, (value, diameter, phase, answer.label)
+    assert sum(read_whole) >= 0.75 * len(read_whole), read_whole
 
 
 def test_painted_polarity_inverts_and_damps_the_glow() -> None:

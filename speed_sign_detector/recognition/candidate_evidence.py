@@ -32,6 +32,7 @@ from speed_sign_detector.recognition.correlation import (
 from speed_sign_detector.recognition.filter_banks import SizeBank
 from speed_sign_detector.recognition.sign_polarity import (
     Polarity,
+    is_partly_unlit,
     painted_polarity,
     sign_polarity,
 )
@@ -61,6 +62,10 @@ class CorrelationEvidence:
         inverted: the sign looked lit on a dark face (an electronic sign,
             :func:`.sign_polarity.is_lit_on_dark`) and was correlated inverted; whatever
             reads it further (the second opinion) must read ``255 - image`` too.
+        partly_unlit: a sign read inverted (lit on a dark face) with rows of its lamps
+            dark: pulsed lamps caught by a rolling shutter between pulses
+            (:func:`.sign_polarity.is_partly_unlit`). What is left of its digits may
+            spell another value, so it is not read.
     """
 
     ranked: tuple[tuple[str, float], ...]
@@ -70,6 +75,7 @@ class CorrelationEvidence:
     rotation_deg: float
     detection_psr: float
     inverted: bool = False
+    partly_unlit: bool = False
 
 
 @dataclass(frozen=True)
@@ -451,10 +457,12 @@ class EvidenceSearch:
         _, roi_x, roi_y, size_radius, roll = max(found[ranked[0][0]])
         scale = position.scale
         half = position.largest / 2.0
+        partly_unlit = position.inverted and is_partly_unlit(position.lit, roi_x, roi_y,
+                                                             size_radius)
         return CorrelationEvidence(ranked, position.x_px + (roi_x - half) / scale,
                                    position.y_px + (roi_y - half) / scale,
                                    size_radius / scale, roll, position.detection_psr,
-                                   position.inverted)
+                                   position.inverted, partly_unlit)
 
     def _lobes(self, radius_px: float) -> tuple[int, int]:
         """PSR window half sizes (sidelobe square, excluded centre) for a sign radius."""

@@ -10,7 +10,8 @@ Method (DAGM 2010, section 4), per candidate:
    sizes near the candidate radius: the filter with the largest peak-to-sidelobe ratio
    (PSR) gives the sign's size and centre. A sign lit on a dark face (an electronic
    sign, :mod:`.sign_polarity`) is read inverted, in the painted templates' polarity,
-   and so is its patch for the second opinion.
+   and so is its patch for the second opinion; one with rows of its lamps dark (caught
+   between their pulses by a rolling shutter) is not read.
 2. The classification filters of that size and its neighbours decide the value by the
    largest PSR. They see only the sign's inner field (the digits): the scene is masked
    with a disc at the detected centre and the templates with the same disc, because
@@ -396,9 +397,12 @@ class Classifier:
         """True when the correlation evidence alone withholds the answer (before any
         second opinion): its PSR is too small (with a second opinion:
         ``second_opinion_psr_threshold`` for a crop, ``frame_second_opinion_psr_threshold``
-        for a frame's candidate), or the sign is cut by the border of the (H, W) ``shape``
-        frame (``None``: a crop, whose border cuts no sign)."""
+        for a frame's candidate), the sign was read inverted with rows of its lamps dark
+        (``evidence.partly_unlit``), or the sign is cut by the border of the (H, W)
+        ``shape`` frame (``None``: a crop, whose border cuts no sign)."""
         config = self.config
+        if evidence.partly_unlit:
+            return True  # what its dark rows leave of the digits may spell another value
         top_psr = evidence.ranked[0][1]
         if opinion is None:
             floor = config.psr_threshold

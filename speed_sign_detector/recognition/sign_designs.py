@@ -13,14 +13,17 @@ Designs (:data:`SIGN_DESIGNS`):
   face (the polarity of a painted sign, with the glow of a lit one).
 
 Every LED design takes an :class:`LedLook`: how much the lit parts bloom (the glow of a
-camera at night), and an exposure gain above 1 that over-exposes them (saturated digits
-whose glow fills their counters).
+camera at night), an exposure gain above 1 that over-exposes them (saturated digits
+whose glow fills their counters), and dark bands: an LED sign's lamps are pulsed (PWM),
+and a rolling-shutter camera with a short exposure catches some rows between the pulses
+(:func:`random_look` with ``banded``).
 
 Sizes and coordinates are as in :mod:`.templates`: the sign's outer diameter in pixels,
 drawn at high resolution and reduced with area interpolation.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -81,16 +84,28 @@ class LedLook:
             spread over ``glow_radius``).
         glow_radius: the bloom's Gaussian sigma relative to the sign radius.
         exposure: gain on the lit parts (1 as drawn; above 1 over-exposed, clipped at 255).
+        band_period: the period of the dark bands (rows exposed between the lamps'
+            pulses), a fraction of the sign's diameter; 0: the sign lit whole.
+        band_lit_share: the share of each period that is lit (0 < share <= 1).
+        band_phase: where the first period starts, a fraction of it (from the sign's top).
     """
 
     glow: float = 0.4
     glow_radius: float = 0.05
     exposure: float = 1.0
+    band_period: float = 0.0
+    band_lit_share: float = 1.0
+    band_phase: float = 0.0
 
     def __post_init__(self) -> None:
         if not (self.glow >= 0.0 and self.glow_radius > 0.0 and self.exposure > 0.0):
             raise DesignError(f'LedLook needs glow >= 0, glow_radius > 0 and exposure > 0, '
                               f'got {self.glow}, {self.glow_radius}, {self.exposure}')
+        if not (self.band_period >= 0.0 and 0.0 < self.band_lit_share <= 1.0
+                and math.isfinite(self.band_phase)):
+            raise DesignError(f'LedLook needs band_period >= 0, 0 < band_lit_share <= 1 and a '
+                              f'finite band_phase, got {self.band_period}, '
+                              f'{self.band_lit_share}, {self.band_phase}')
 
 
 def lit_on_dark_design(design: str) -> bool:
@@ -141,6 +156,17 @@ def _dot_matrix(lit: np.ndarray, size_px: int) -> np.ndarray:
     return out
 
 
+def _lit_rows(size_px: int, look: LedLook) -> np.ndarray:
+    """(S, 1, 1) float32 share of each row of an ``size_px`` drawing that is lit: 1, or 0
+    in the dark bands of ``look`` (edges softened over a hundredth of the diameter)."""
+    if look.band_period <= 0.0 or look.band_lit_share >= 1.0:
+        return np.ones((size_px, 1, 1), np.float32)
+    phase = (np.arange(size_px, dtype=np.float32) + 0.5) / (look.band_period * size_px)
+    lit = (((phase + look.band_phase) % 1.0) < look.band_lit_share).astype(np.float32)
+    soft = cv2.GaussianBlur(lit[:, None], (1, 0), 0.01 * size_px)
+    return soft.reshape(size_px, 1, 1)
+
+
 def _render_led_highres(kind: str, size_px: int, design: str, look: LedLook
                         ) -> tuple[np.ndarray, np.ndarray]:
     """An LED sign drawn at ``size_px``: (bgr (S, S, 3) uint8 premultiplied, alpha)."""
@@ -150,6 +176,7 @@ def _render_led_highres(kind: str, size_px: int, design: str, look: LedLook
     lit = np.maximum(drawing - face * alpha[..., None], 0.0)
     if design == 'led_dot_matrix':
         lit = _dot_matrix(lit, size_px)
+    lit = lit * _lit_rows(size_px, look)
     sigma = look.glow_radius * size_px / 2.0
     bloom = cv2.GaussianBlur(lit, (0, 0), sigma) if look.glow > 0 else 0.0
     # lit parts premultiplied already; the bloom kept inside the disc
@@ -245,19 +272,25 @@ def _camera(image: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return cv2.imdecode(encoded, cv2.IMREAD_GRAYSCALE)
 
 
-def random_look(design: str, rng: np.random.Generator) -> LedLook:
+def random_look(design: str, rng: np.random.Generator, banded: bool = False) -> LedLook:
     """An LED look drawn at random: a glow from none to strong, an exposure from right to
-    about twice too long (ignored by the painted designs)."""
+    about twice too long (ignored by the painted designs); ``banded``: dark bands too, a
+    period of 0.3-2 diameters of which 40-85 % is lit, at a random phase."""
     del design  # the same range for every LED design
-    return LedLook(glow=float(rng.uniform(0.0, 1.0)), glow_radius=float(rng.uniform(0.03, 0.08)),
+    look = LedLook(glow=float(rng.uniform(0.0, 1.0)), glow_radius=float(rng.uniform(0.03, 0.08)),
                    exposure=float(rng.uniform(0.8, 2.0)))
+    if not banded:
+        return look
+    return dataclasses.replace(look, band_period=float(rng.uniform(0.3, 2.0)),
+                               band_lit_share=float(rng.uniform(0.4, 0.85)),
+                               band_phase=float(rng.uniform(0.0, 1.0)))
 
 
-def design_crop(kind: str, design: str, diameter_px: int, rng: np.random.Generator
-                ) -> np.ndarray:
+def design_crop(kind: str, design: str, diameter_px: int, rng: np.random.Generator,
+                banded: bool = False) -> np.ndarray:
     """A camera's crop of one sign of ``design`` (GTSRB framing: a margin of 10% of the
-    diameter, at least 5 px), on random surroundings, with a random LED look, blur, noise
-    and JPEG compression.
+    diameter, at least 5 px), on random surroundings, with a random LED look (with dark
+    bands where ``banded``: :func:`random_look`), blur, noise and JPEG compression.
 
     Returns:
         (S, S) uint8 gray crop, S = ``diameter_px`` + 2 margins.
@@ -265,7 +298,7 @@ def design_crop(kind: str, design: str, diameter_px: int, rng: np.random.Generat
     margin = max(5, int(round(0.1 * diameter_px)))
     side = int(diameter_px) + 2 * margin
     scene = design_gray(kind, int(diameter_px), design, _background(side, design, rng),
-                        random_look(design, rng))
+                        random_look(design, rng, banded))
     return _camera(scene, rng)
 
 
