@@ -162,6 +162,12 @@ def _masks(window_px: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return caps, box, ring
 
 
+def _usable(x_px: float, y_px: float, radius_px: float) -> bool:
+    """True for a finite centre and a finite positive radius (pixels)."""
+    return bool(radius_px > 0 and np.isfinite(radius_px) and np.isfinite(x_px)
+                and np.isfinite(y_px))
+
+
 def _window(gray: np.ndarray, x_px: float, y_px: float, radius_px: float) -> np.ndarray:
     """(WINDOW_PX, WINDOW_PX) float32 window whose sign radius is half its side, border
     pixels replicated outside the image."""
@@ -239,8 +245,7 @@ def sign_polarity(gray: np.ndarray, x_px: float, y_px: float, radius_px: float
     where :func:`is_lit_on_dark` holds, else :attr:`Polarity.UNSURE` where
     :func:`may_be_lit_on_dark` does, else :attr:`Polarity.PAINTED` (also for an unusable
     position or radius)."""
-    if not (radius_px > 0 and np.isfinite(radius_px) and np.isfinite(x_px)
-            and np.isfinite(y_px)):
+    if not _usable(x_px, y_px, radius_px):
         return Polarity.PAINTED
     face, digits, ring, digit_box = _levels(
         _window(gray, float(x_px), float(y_px), float(radius_px)).ravel())
@@ -298,8 +303,7 @@ def is_lit_face(gray: np.ndarray, x_px: float, y_px: float, radius_px: float) ->
     and so does a painted sign lit bright before a dark background; a painted sign in
     daylight, an electronic sign lit on a dark face and an unusable position or radius do
     not."""
-    if not (radius_px > 0 and np.isfinite(radius_px) and np.isfinite(x_px)
-            and np.isfinite(y_px)):
+    if not _usable(x_px, y_px, radius_px):
         return False
     window = _window(gray, float(x_px), float(y_px),
                      float(radius_px) * LIT_FACE_SURROUND_RADII[1]).ravel()
@@ -310,14 +314,14 @@ def is_lit_face(gray: np.ndarray, x_px: float, y_px: float, radius_px: float) ->
 
 
 @functools.lru_cache(maxsize=2)
-def _row_masks(window_px: int) -> tuple[tuple[np.ndarray, ...], np.ndarray]:
-    """Per tested row of a window whose sign radius is half its side (the rows within
-    :data:`UNLIT_ROW_HALF_HEIGHT`): the flat indices of its pixels inside
-    :data:`UNLIT_ROW_DISC`; then the face's caps."""
+def _row_masks(window_px: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For a window whose sign radius is half its side: the tested rows (those within
+    :data:`UNLIT_ROW_HALF_HEIGHT`), which of their pixels lie inside
+    :data:`UNLIT_ROW_DISC` ((rows, window_px) bool), and the flat indices of the face's
+    caps."""
     dy, _, distance = _window_grid(window_px)
-    rows = tuple(np.flatnonzero((distance <= UNLIT_ROW_DISC) & (dy == dy[row, 0]))
-                 for row in range(window_px) if abs(dy[row, 0]) <= UNLIT_ROW_HALF_HEIGHT)
-    return rows, _caps(dy, distance)
+    rows = np.flatnonzero(np.abs(dy[:, 0]) <= UNLIT_ROW_HALF_HEIGHT)
+    return rows, distance[rows] <= UNLIT_ROW_DISC, _caps(dy, distance)
 
 
 def is_partly_unlit(gray: np.ndarray, x_px: float, y_px: float, radius_px: float) -> bool:
@@ -333,13 +337,12 @@ def is_partly_unlit(gray: np.ndarray, x_px: float, y_px: float, radius_px: float
     sign :func:`is_lit_on_dark` (or read inverted): a painted sign's face may be darker
     than its ring (in shadow, backlit) and its rows unlike. False for an unusable position
     or radius."""
-    if not (radius_px > 0 and np.isfinite(radius_px) and np.isfinite(x_px)
-            and np.isfinite(y_px)):
+    if not _usable(x_px, y_px, radius_px):
         return False
-    window = _window(gray, float(x_px), float(y_px), float(radius_px)).ravel()
-    rows, caps = _row_masks(WINDOW_PX)
-    face = _median(window[caps])
-    contrast = np.array([float(window[row].max()) for row in rows]) - face
+    window = _window(gray, float(x_px), float(y_px), float(radius_px))
+    rows, inside, caps = _row_masks(WINDOW_PX)
+    face = _median(window.ravel()[caps])
+    contrast = np.where(inside, window[rows], -np.inf).max(axis=1) - face
     typical = float(np.median(contrast))
     pairs = np.maximum(contrast[:-1], contrast[1:])
     return typical > 0.0 and float(pairs.min()) < UNLIT_ROW_MIN_SHARE * typical
